@@ -1,0 +1,33 @@
+"""nsga_jax: nonsmooth multibody dynamics with the decoupled nonsmooth generalized-α scheme.
+
+Importing the package turns on float64 (``jax_enable_x64``): the schemes'
+Newton tolerances and constraint checks are meant for double precision.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+from .integrators.coefficients import GenAlphaCoefficients  # noqa: E402
+from .integrators.ds import DS, StepOutput, StepState  # noqa: E402
+from .models import BouncingBall, ElasticBar, Model, RigidPendulum  # noqa: E402
+from .results import ConfigError, ConvergenceError, Result  # noqa: E402
+from .simulate import Solution, simulate  # noqa: E402
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "DS",
+    "GenAlphaCoefficients",
+    "StepOutput",
+    "StepState",
+    "Model",
+    "BouncingBall",
+    "RigidPendulum",
+    "ElasticBar",
+    "Result",
+    "ConfigError",
+    "ConvergenceError",
+    "Solution",
+    "simulate",
+]

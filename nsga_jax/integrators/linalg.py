@@ -1,0 +1,82 @@
+"""Linear algebra of the iteration matrices (paper eqs. 47-49).
+
+Each sub-problem's iteration matrix is *bordered*: a top-left block on the
+coordinates and a constraint block, with an active-set mask ``a``:
+
+    [ A + p Gu^T diag(a) Gl    -k Gu^T diag(a)      ] [dx ]     [r1]
+    [ -k diag(a) Gl            -(k^2/p) diag(1-a)   ] [dmu] = - [r2]
+
+(smooth motion: Gu = g_q^B, Gl = g_q^B + (hβ/γ) G^s, all rows active;
+position: Gu = Gl = g_q, a = A; velocity: Gu = Gl = g_q, a = B).
+
+It is solved by a Schur complement on the (small) active constraint block,
+with A the top-left block *without* its penalty term p Gu^T a Gl. Eliminating
+the active rows ``Gl dx = r2/k`` shows that the penalty term only shifts the
+multiplier correction by ``(p/k^2) r2``, so the iterates are exactly those of
+the full matrix (the solution never depends on k and p, only the conditioning
+does). This lets a linear model keep one constant factorisation of A for every
+active set. A must be non-singular, which holds when M is positive definite.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import ActiveSet, Scalar, Vector
+
+Solve = Callable[[jax.Array], jax.Array]
+"""``X -> A^{-1} X`` for X of shape (n,) or (n, m)."""
+
+
+def inverse_solve(inverse: jax.Array) -> Solve:
+    """Solve with a precomputed inverse (a constant matrix factorised once)."""
+    return lambda rhs: inverse @ rhs
+
+
+def dense_solve(matrix: jax.Array) -> Solve:
+    """Solve with a fresh LU factorisation of ``matrix``."""
+    return lambda rhs: jnp.linalg.solve(matrix, rhs)
+
+
+def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
+    """Solve ``D[a, a] x[a] = rhs[a]``; x is zero on inactive rows."""
+    both = active[:, None] & active[None, :]
+    Dm = jnp.where(both, D, jnp.eye(D.shape[0], dtype=D.dtype))
+    return jnp.where(active, jnp.linalg.solve(Dm, jnp.where(active, rhs, 0.0)), 0.0)
+
+
+def solve_bordered(
+    solve: Solve,
+    r1: Vector,
+    r2: jax.Array,
+    G_up: jax.Array,
+    G_low: jax.Array,
+    active: ActiveSet,
+    k: Scalar,
+    p: Scalar,
+    A_inv_Gt: jax.Array | None = None,
+) -> tuple[Vector, jax.Array]:
+    """Newton correction (dx, dmu) of a bordered system (see module docstring).
+
+    Args:
+        solve: applies A^{-1}.
+        r1: coordinate residual, shape (n,).
+        r2: constraint residual, shape (m,).
+        G_up, G_low: constraint gradient blocks, shape (m, n).
+        active: active-set mask, shape (m,).
+        k, p: multiplier scaling and penalty.
+        A_inv_Gt: A^{-1} G_up^T, shape (n, m), when it is precomputed.
+    """
+    if A_inv_Gt is None:
+        sol = solve(jnp.concatenate([r1[:, None], G_up.T], axis=1))
+        y, A_inv_Gt = sol[:, 0], sol[:, 1:]
+    else:
+        y = solve(r1)
+    D = G_low @ A_inv_Gt
+    dmu_red = masked_solve(D, r2 / k**2 + (G_low @ y) / k, active)
+    dx = -y + k * (A_inv_Gt @ dmu_red)
+    dmu = dmu_red + (p / k**2) * r2
+    return dx, dmu

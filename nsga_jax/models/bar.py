@@ -1,0 +1,81 @@
+"""The elastic bar of the paper's §4.2: 1D linear finite elements against a wall."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Matrix, Scalar, Vector
+from ..assembly import ElementGroup, StaticIndex
+from ..elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
+from .base import Model
+
+
+def _as_float(x) -> jax.Array:
+    return jnp.asarray(x, dtype=float)
+
+
+class ElasticBar(Model):
+    """A uniform bar of ``n_elements`` two-node elements moving along its axis.
+
+    Coordinates: nodal axial displacements u (n_elements + 1,) [m], positive
+    toward the wall, node 0 at the free end and the last node (the tip) facing
+    the wall. One unilateral constraint: the tip gap g = gap0 - u_tip >= 0.
+    The model is linear (constant M and K), so the integrator factors its
+    iteration matrices once.
+    """
+
+    E: Scalar = eqx.field(converter=_as_float)
+    rho: Scalar = eqx.field(converter=_as_float)
+    area: Scalar = eqx.field(converter=_as_float)
+    length: Scalar = eqx.field(converter=_as_float)
+    gap0: Scalar = eqx.field(converter=_as_float)
+    e: Scalar = eqx.field(converter=_as_float)
+    n_elements: int = eqx.field(static=True)
+    lumped: bool = eqx.field(static=True, default=False)
+
+    n_unilateral = 1
+    constant_mass = True
+    linear_force = True
+    linear_constraints = True
+
+    @property
+    def n_dof(self) -> int:
+        return self.n_elements + 1
+
+    @property
+    def mbar(self) -> Scalar:
+        return self.rho * self.area * self.length
+
+    @property
+    def elements(self) -> ElementGroup:
+        ne = self.n_elements
+        dofs = StaticIndex(np.stack([np.arange(ne), np.arange(1, ne + 1)], axis=1))
+        ones = jnp.ones((ne,))
+        params = (self.E * self.area * ones, self.length / ne * ones, self.rho * self.area * ones)
+        return ElementGroup(dofs=dofs, params=params)
+
+    def mass(self, q: Vector) -> Matrix:
+        fn = bar_lumped_mass if self.lumped else bar_consistent_mass
+        return self.elements.matrix(fn, self.n_dof)
+
+    def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
+        return self.elements.forces(bar_internal_force, q, v, self.n_dof)
+
+    def tangents(self, q: Vector, v: Vector, t: Scalar) -> tuple[Matrix, Matrix]:
+        return self.elements.tangents(bar_internal_force, q, v, self.n_dof)
+
+    def unilateral(self, q: Vector) -> jax.Array:
+        return (self.gap0 - q[-1])[None]
+
+    @property
+    def restitution(self) -> jax.Array:
+        return self.e[None]
+
+    def energy(self, q: Vector, v: Vector) -> Scalar:
+        """Kinetic + strain energy [J]."""
+        M = self.mass(q)
+        K, _ = self.tangents(q, v, jnp.zeros(()))
+        return 0.5 * v @ M @ v + 0.5 * q @ K @ q

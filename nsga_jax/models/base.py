@@ -1,0 +1,139 @@
+"""The semi-discrete model: what the time integrator needs to know of a system.
+
+A model describes the equations of motion (paper eq. 1)
+
+    M(q) dv - g_q(q)^T di = f(q, v, t) dt,
+    g^B(q) = 0                       (bilateral constraints),
+    g^U(q) >= 0, Newton impact law   (unilateral constraints, restitution e),
+
+through a handful of pure functions. Everything numeric is a pytree leaf (so a
+model can be differentiated and batched); everything structural (sizes, which
+terms are constant or linear) is a static field, known at trace time, so the
+integrator compiles only what a scene needs.
+
+Conventions: ``n`` coordinates, ``nb`` bilateral and ``nu`` unilateral
+constraints, ``nc = nb + nu``; the constraint vector is ``[g^B; g^U]``
+(bilaterals first). ``force`` returns f, the *right-hand side* (external +
+internal + damping + complementary inertia); its tangents are
+``K = -df/dq`` and ``C = -df/dv``.
+"""
+
+from __future__ import annotations
+
+import abc
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
+
+
+class Model(eqx.Module):
+    """Abstract base class of every model.
+
+    Subclasses implement :meth:`mass`, :meth:`force`, and where they have
+    constraints :meth:`bilateral`, :meth:`unilateral` and :attr:`restitution`.
+    They declare their sizes and structure through the abstract properties
+    below (plain Python values, never arrays).
+
+    The tangents default to ``jax.jacfwd`` of the global functions; models
+    assembled from elements override :meth:`tangents` with element-level
+    tangents (see :mod:`nsga_jax.assembly`).
+    """
+
+    # ----------------------------------------------------------- structure
+    @property
+    @abc.abstractmethod
+    def n_dof(self) -> int:
+        """Number of generalised coordinates ``n``."""
+
+    @property
+    def n_bilateral(self) -> int:
+        """Number of bilateral constraints ``nb``."""
+        return 0
+
+    @property
+    def n_unilateral(self) -> int:
+        """Number of unilateral constraints ``nu``."""
+        return 0
+
+    @property
+    def n_constraints(self) -> int:
+        return self.n_bilateral + self.n_unilateral
+
+    @property
+    def constant_mass(self) -> bool:
+        """``True`` when M does not depend on q (it is then evaluated once)."""
+        return False
+
+    @property
+    def linear_force(self) -> bool:
+        """``True`` when f is affine in (q, v) with constant K and C."""
+        return False
+
+    @property
+    def linear_constraints(self) -> bool:
+        """``True`` when every constraint is affine in q (constant g_q)."""
+        return False
+
+    @property
+    @abc.abstractmethod
+    def mbar(self) -> Scalar | float:
+        """Characteristic mass m̄ [kg] used to scale the multipliers (paper §3.3.6)."""
+
+    # --------------------------------------------------------------- physics
+    @abc.abstractmethod
+    def mass(self, q: Vector) -> Matrix:
+        """Mass matrix M(q), shape (n, n) [kg or kg m²]."""
+
+    @abc.abstractmethod
+    def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
+        """Force vector f(q, v, t), shape (n,) [N]."""
+
+    def tangents(self, q: Vector, v: Vector, t: Scalar) -> tuple[Matrix, Matrix]:
+        """Stiffness ``K = -df/dq`` and damping ``C = -df/dv``, each (n, n)."""
+        K = -jax.jacfwd(self.force, argnums=0)(q, v, t)
+        C = -jax.jacfwd(self.force, argnums=1)(q, v, t)
+        return K, C
+
+    def bilateral(self, q: Vector) -> ConstraintVector:
+        """Bilateral constraints g^B(q), shape (nb,) [m]; zero when satisfied."""
+        return jnp.zeros((0,), dtype=q.dtype)
+
+    def unilateral(self, q: Vector) -> ConstraintVector:
+        """Unilateral gaps g^U(q), shape (nu,) [m]; admissible when >= 0."""
+        return jnp.zeros((0,), dtype=q.dtype)
+
+    @property
+    def restitution(self) -> ConstraintVector:
+        """Newton restitution coefficients e, shape (nu,), each in [0, 1]."""
+        return jnp.zeros((self.n_unilateral,))
+
+    # ------------------------------------------------ derived (not overridden)
+    def constraints(self, q: Vector) -> ConstraintVector:
+        """All constraints ``[g^B; g^U]``, shape (nc,)."""
+        return jnp.concatenate([self.bilateral(q), self.unilateral(q)])
+
+    def constraint_jacobian(self, q: Vector) -> ConstraintMatrix:
+        """g_q = d[g^B; g^U]/dq, shape (nc, n)."""
+        return jax.jacfwd(self.constraints)(q)
+
+    def constraint_curvature(self, q: Vector, mu: ConstraintVector) -> Matrix:
+        """d(g_q(q)^T mu)/dq at fixed mu, shape (n, n); zero for affine constraints."""
+        if self.linear_constraints or self.n_constraints == 0:
+            return jnp.zeros((self.n_dof, self.n_dof), dtype=q.dtype)
+        return jax.jacfwd(lambda x: self.constraint_jacobian(x).T @ mu)(q)
+
+    def velocity_constraint_gradient(self, q: Vector, v: Vector) -> ConstraintMatrix:
+        """G^s = d(g_q(q) v)/dq at fixed v, shape (nc, n) (paper eq. 50)."""
+        if self.linear_constraints or self.n_constraints == 0:
+            return jnp.zeros((self.n_constraints, self.n_dof), dtype=q.dtype)
+        return jax.jacfwd(lambda x: self.constraint_jacobian(x) @ v)(q)
+
+    def inertia_stiffness(self, q: Vector, a: Vector) -> Matrix:
+        """d(M(q) a)/dq at fixed a, shape (n, n); zero for a constant mass."""
+        if self.constant_mass:
+            return jnp.zeros((self.n_dof, self.n_dof), dtype=q.dtype)
+        return jax.jacfwd(lambda x: self.mass(x) @ a)(q)
+

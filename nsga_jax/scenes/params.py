@@ -1,0 +1,106 @@
+"""Typed, range-checked scene parameters and solver settings.
+
+Every numeric field of a scene config has a :class:`Param` that states its
+unit, default and allowed range; values are checked before anything is traced,
+and an error names the field and the range.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from ..results import ConfigError
+
+
+@dataclass(frozen=True)
+class Param:
+    """One config field.
+
+    ``kind`` is ``"float"``, ``"int"`` or ``"choice"``; ``lo``/``hi`` bound
+    float and int fields (``lo_open``/``hi_open`` exclude the bound);
+    ``choices`` lists the values of a choice field.
+    """
+
+    default: Any
+    doc: str
+    unit: str = ""
+    kind: str = "float"
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+    choices: tuple[str, ...] = ()
+    note: str = ""
+
+    def range_text(self) -> str:
+        if self.kind == "choice":
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        left = "(" if self.lo_open or self.lo == -math.inf else "["
+        right = ")" if self.hi_open or self.hi == math.inf else "]"
+        lo = "-inf" if self.lo == -math.inf else f"{self.lo:g}"
+        hi = "inf" if self.hi == math.inf else f"{self.hi:g}"
+        return f"{left}{lo}, {hi}{right}"
+
+    def check(self, name: str, value: Any) -> Any:
+        """Return the value converted to its kind, or raise :class:`ConfigError`."""
+        unit = f" [{self.unit}]" if self.unit else ""
+        if self.kind == "choice":
+            if value not in self.choices:
+                raise ConfigError(f"{name} must be {self.range_text()}, got {value!r}")
+            return value
+        if isinstance(value, bool):
+            raise ConfigError(f"{name}{unit} must be a number, got {value!r}")
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{name}{unit} must be a number, got {value!r}") from None
+        if not math.isfinite(x):
+            raise ConfigError(f"{name}{unit} must be finite (in {self.range_text()}), got {value!r}")
+        if self.kind == "int":
+            if x != int(x):
+                raise ConfigError(f"{name} must be an integer in {self.range_text()}, got {value!r}")
+            x = int(x)
+        too_low = x < self.lo or (self.lo_open and x == self.lo)
+        too_high = x > self.hi or (self.hi_open and x == self.hi)
+        if too_low or too_high:
+            note = f" ({self.note})" if self.note else ""
+            raise ConfigError(f"{name}{unit} must be in {self.range_text()}{note}, got {value!r}")
+        return x
+
+
+def positive(default, doc, unit="") -> Param:
+    return Param(default, doc, unit, lo=0.0, lo_open=True)
+
+
+def nonnegative(default, doc, unit="") -> Param:
+    return Param(default, doc, unit, lo=0.0)
+
+
+def unit_interval(default, doc) -> Param:
+    return Param(default, doc, "", lo=0.0, hi=1.0)
+
+
+SOLVER_PARAMS: dict[str, Param] = {
+    "scheme": Param("ds", "time integration scheme", kind="choice", choices=("ds",)),
+    "h": positive(1e-3, "step size", "s"),
+    "t_end": positive(1.0, "end time (the run starts at t = 0)", "s"),
+    "rho_inf": unit_interval(0.8, "spectral radius at infinity ρ∞ of generalized-α (eq. 35)"),
+    "tol_r": Param(1e-5, "relative Newton tolerance of eq. 51", lo=0.0, lo_open=True, hi=1.0, hi_open=True),
+    "tol_f": positive(1e-5, "reference Newton tolerance of eq. 51"),
+    "max_iter": Param(50, "Newton iteration cap per sub-problem", kind="int", lo=1, hi=10_000),
+}
+
+
+def check_all(section: str, specs: dict[str, Param], values: dict[str, Any]) -> dict[str, Any]:
+    """Check ``values`` against ``specs``; unknown keys are refused. Missing keys take defaults."""
+    unknown = sorted(set(values) - set(specs))
+    if unknown:
+        raise ConfigError(
+            f"unknown {section} key {unknown[0]!r}; allowed keys: {', '.join(sorted(specs))}"
+        )
+    out = {}
+    for name, spec in specs.items():
+        out[name] = spec.check(name, values[name]) if name in values else spec.default
+    return out
