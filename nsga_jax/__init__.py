@@ -12,7 +12,7 @@ from .integrators.coefficients import GenAlphaCoefficients  # noqa: E402
 from .integrators.ds import DS, StepOutput, StepState  # noqa: E402
 from .models import BouncingBall, ElasticBar, Model, RigidPendulum  # noqa: E402
 from .results import ConfigError, ConvergenceError, Result  # noqa: E402
-from .simulate import Solution, simulate  # noqa: E402
+from ._simulate import Solution, simulate  # noqa: E402
 
 __version__ = "0.1.0"
 

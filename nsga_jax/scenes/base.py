@@ -15,7 +15,7 @@ import numpy as np
 from ..integrators.ds import DS
 from ..models.base import Model
 from ..results import ConfigError
-from ..simulate import Solution, simulate
+from .._simulate import Solution, simulate
 from .params import SOLVER_PARAMS, Param, check_all
 
 
@@ -79,7 +79,7 @@ class SceneSpec:
                 lines += ["", "[solver]"]
             for key, p in specs.items():
                 unit = f" [{p.unit}]" if p.unit else ""
-                lines.append(f"# {p.doc}{unit}, in {p.range_text()}")
+                lines.append(f"# {p.doc}{unit}; allowed: {p.range_text()}")
                 lines.append(f"{key} = {_toml_value(p.default)}")
         return "\n".join(lines) + "\n"
 

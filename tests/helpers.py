@@ -1,0 +1,44 @@
+"""Small models used only by the tests."""
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from nsga_jax.models import ElasticBar, Model
+
+
+class Oscillator(Model):
+    """Undamped linear oscillator m q'' + k q = 0 (one coordinate)."""
+
+    m: float = eqx.field(converter=jnp.asarray)
+    k: float = eqx.field(converter=jnp.asarray)
+
+    n_dof = 1
+    constant_mass = True
+    linear_force = True
+    linear_constraints = True
+
+    @property
+    def mbar(self):
+        return self.m
+
+    def mass(self, q):
+        return self.m * jnp.eye(1)
+
+    def force(self, q, v, t):
+        return -self.k * q
+
+
+class GenericBar(ElasticBar):
+    """The elastic bar with its structure flags off: takes the generic (refactorising) path."""
+
+    @property
+    def constant_mass(self):
+        return False
+
+    @property
+    def linear_force(self):
+        return False
+
+    @property
+    def linear_constraints(self):
+        return False

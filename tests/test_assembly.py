@@ -1,0 +1,54 @@
+"""Element functions, their jacfwd tangents, assembly, and the linear fast path."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import nsga_jax as nj
+from nsga_jax.elements import bar_internal_force
+
+from helpers import GenericBar
+
+BAR = dict(E=900.0, rho=1.0, area=1.0, length=10.0, gap0=5.005, e=0.0, n_elements=20)
+
+
+def test_element_tangent_matches_finite_differences():
+    p = (jnp.asarray(900.0), jnp.asarray(0.05), jnp.asarray(1.0))
+    u = jnp.array([0.3, 0.31])
+    v = jnp.zeros(2)
+    K_ad = -jax.jacfwd(bar_internal_force)(u, v, p)
+    eps = 1e-6
+    K_fd = np.stack([-(bar_internal_force(u + eps * d, v, p) - bar_internal_force(u - eps * d, v, p)) / (2 * eps)
+                     for d in jnp.eye(2)], axis=1)
+    np.testing.assert_allclose(K_ad, K_fd, rtol=1e-7)
+
+
+def test_assembled_bar_matrices():
+    model = nj.ElasticBar(**BAR)
+    n = model.n_dof
+    q = jnp.zeros(n)
+    K, C = model.tangents(q, q, 0.0)
+    k = 900.0 / 0.5
+    expected = k * (np.diag(np.r_[1, 2 * np.ones(n - 2), 1]) - np.diag(np.ones(n - 1), 1) - np.diag(np.ones(n - 1), -1))
+    np.testing.assert_allclose(K, expected, rtol=1e-14)
+    assert np.all(np.asarray(C) == 0.0)
+    M = np.asarray(model.mass(q))
+    assert np.ones(n) @ M @ np.ones(n) == pytest.approx(10.0)  # total mass
+    # rigid translation: no internal force
+    assert np.abs(model.force(jnp.full(n, 3.7), q, 0.0)).max() < 1e-11
+    # f = -K q for the linear element
+    u = jnp.asarray(np.random.default_rng(0).normal(size=n))
+    np.testing.assert_allclose(model.force(u, q, 0.0), -K @ u, atol=1e-10)
+
+
+def test_fast_path_equals_generic_path():
+    fast_model = nj.ElasticBar(**BAR)
+    generic_model = GenericBar(**BAR)
+    q0, v0 = np.zeros(fast_model.n_dof), np.full(fast_model.n_dof, 10.0)
+    fast = nj.simulate(fast_model, nj.DS(), 0.0, 1.3, 2e-3, q0, v0)
+    generic = nj.simulate(generic_model, nj.DS(), 0.0, 1.3, 2e-3, q0, v0)
+    assert fast.impulse[:, 0].sum() > 150.0  # the contact is in the window
+    np.testing.assert_allclose(fast.q, generic.q, atol=1e-9)
+    np.testing.assert_allclose(fast.v, generic.v, atol=1e-7)
+    np.testing.assert_allclose(fast.impulse, generic.impulse, atol=1e-7)

@@ -1,0 +1,83 @@
+"""The command line: run writes trajectory, summary and plots; bad input exits 2."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nsga_jax.cli import main
+from nsga_jax.output import load_partial
+from nsga_jax.scenes import REGISTRY, load_scene
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+def test_run_writes_results(tmp_path, capsys):
+    out = tmp_path / "ball"
+    rc = main(["run", "bouncing_ball", "--t-end", "1.0", "--h", "2e-3", "--set", "e=0.5",
+               "--out", str(out), "--chunk", "128", "--quiet"])
+    assert rc == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("scene", "scheme", "h", "n_steps", "wall_time_s", "compile_time_s", "failed_steps",
+                "max_penetration", "max_bilateral_violation_position", "max_bilateral_violation_velocity"):
+        assert key in summary
+    assert summary["n_steps"] == 500 and summary["parameters"]["e"] == 0.5
+    for sub in ("smooth", "position", "velocity", "linear_solves"):
+        assert set(summary["iterations"][sub]) == {"mean", "max"}
+    data = np.load(out / "trajectory.npz")
+    for key in ("t", "q", "v", "z", "vz"):
+        assert key in data
+    assert data["q"].shape == (501, 1)
+    assert (out / "observables.png").stat().st_size > 1000
+    assert (out / "iterations.png").stat().st_size > 1000
+    assert not (out / "partial").exists()
+    assert "500 steps" in capsys.readouterr().out
+
+
+def test_chunks_are_written_as_they_finish(tmp_path):
+    from nsga_jax.output import chunk_writer
+
+    out = tmp_path / "partial_run"
+    scene = load_scene("bouncing_ball", {"t_end": 1.0, "h": 1e-2})
+    sol = scene.run(chunk_size=30, on_chunk=chunk_writer(out))
+    partial = load_partial(out)
+    assert len(list((out / "partial").glob("*.npz"))) == 4
+    np.testing.assert_array_equal(partial["q"], sol.q[1:])
+
+
+def test_bad_input_exits_2(tmp_path, capsys):
+    assert main(["run", "bouncing_ball", "--set", "e=1.5", "--out", str(tmp_path)]) == 2
+    assert "e must be in [0, 1], got 1.5" in capsys.readouterr().err
+    assert main(["run", "bouncing_ball", "--rho-inf", "2", "--out", str(tmp_path)]) == 2
+    assert "rho_inf must be in [0, 1]" in capsys.readouterr().err
+    assert main(["run", "no_such_scene"]) == 2
+    assert "unknown scene" in capsys.readouterr().err
+
+
+def test_failure_exit_code_and_no_throw(tmp_path, capsys):
+    out = tmp_path / "pend"
+    args = ["run", "rigid_pendulum", "--t-end", "1.0", "--set", "max_iter=1", "--out", str(out), "--quiet"]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "position correction" in err and "step" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["failed_steps"] == 1 and summary["error"]
+    assert main(args + ["--no-throw"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["failed_steps"] >= 1 and summary["n_steps"] == 1000 and summary["error"] is None
+
+
+@pytest.mark.parametrize("name", sorted(REGISTRY))
+def test_shipped_configs_match_scene_defaults(name):
+    path = CONFIGS / f"{name}.toml"
+    assert path.read_text() == REGISTRY[name].default_toml()
+    scene = load_scene(path)
+    assert scene.parameters == {k: p.default for k, p in REGISTRY[name].parameters.items()}
+
+
+def test_scenes_listing(capsys):
+    assert main(["scenes"]) == 0
+    out = capsys.readouterr().out
+    for name in REGISTRY:
+        assert name in out

@@ -1,0 +1,128 @@
+"""Every bad input is refused with an error naming the field and its range,
+before anything is traced or compiled."""
+
+import math
+
+import numpy as np
+import pytest
+
+import nsga_jax as nj
+import nsga_jax._simulate as simulate_module
+from nsga_jax.scenes import load_scene
+
+
+@pytest.fixture(autouse=True)
+def no_compilation(monkeypatch):
+    """Any attempt to lower/compile during these tests is a failure."""
+
+    class Forbidden:
+        def lower(self, *args, **kwargs):
+            raise AssertionError("compilation started before validation finished")
+
+        __call__ = lower
+
+    monkeypatch.setattr(simulate_module, "_prepare_and_init", Forbidden())
+    monkeypatch.setattr(simulate_module, "_run_chunk_jit", Forbidden())
+
+
+def refused(match, fn, *args, **kwargs):
+    with pytest.raises(nj.ConfigError, match=match):
+        fn(*args, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "scene, key, value, match",
+    [
+        ("bouncing_ball", "mass", -1.0, r"mass \[kg\] must be in \(0, inf\)"),
+        ("bouncing_ball", "mass", 0.0, r"mass \[kg\] must be in \(0, inf\)"),
+        ("rigid_pendulum", "mass", -2.0, r"mass \[kg\] must be in \(0, inf\)"),
+        ("rigid_pendulum", "length", 0.0, r"length \[m\] must be in \(0, inf\)"),
+        ("impacting_bar", "length", -10.0, r"length \[m\] must be in \(0, inf\)"),
+        ("impacting_bar", "E", -900.0, r"E \[Pa\] must be in \(0, inf\)"),
+        ("impacting_bar", "rho", 0.0, r"rho \[kg/m\^3\] must be in \(0, inf\)"),
+        ("impacting_bar", "n_elements", 0, r"n_elements must be in \[1, 100000\]"),
+        ("impacting_bar", "n_elements", 2.5, r"n_elements must be an integer"),
+        ("bouncing_ball", "h", -1e-3, r"h \[s\] must be in \(0, inf\)"),
+        ("bouncing_ball", "h", 0.0, r"h \[s\] must be in \(0, inf\)"),
+        ("bouncing_ball", "t_end", -1.0, r"t_end \[s\] must be in \(0, inf\)"),
+        ("bouncing_ball", "rho_inf", 1.5, r"rho_inf must be in \[0, 1\]"),
+        ("bouncing_ball", "rho_inf", -0.1, r"rho_inf must be in \[0, 1\]"),
+        ("bouncing_ball", "e", 1.2, r"e must be in \[0, 1\]"),
+        ("rigid_pendulum", "e", -0.1, r"e must be in \[0, 1\]"),
+        ("impacting_bar", "e", 2.0, r"e must be in \[0, 1\]"),
+        ("bouncing_ball", "height", -0.1, r"height .* initial penetration"),
+        ("impacting_bar", "gap", -1.0, r"gap .* initial penetration"),
+        ("bouncing_ball", "velocity", math.nan, r"velocity \[m/s\] must be finite"),
+        ("impacting_bar", "E", math.inf, r"E \[Pa\] must be finite"),
+        ("bouncing_ball", "tol_r", 0.0, r"tol_r must be in \(0, 1\)"),
+        ("bouncing_ball", "max_iter", 0, r"max_iter must be in \[1, 10000\]"),
+        ("impacting_bar", "mass_matrix", "diagonal", r"mass_matrix must be one of 'consistent', 'lumped'"),
+        ("bouncing_ball", "mass", "heavy", r"mass \[kg\] must be a number"),
+    ],
+)
+def test_scene_field_is_checked(scene, key, value, match):
+    refused(match, load_scene, scene, {key: value})
+
+
+def test_unknown_key_and_scene():
+    refused(r"unknown config key 'stiffness'.*allowed keys: e, gravity", load_scene, "bouncing_ball", {"stiffness": 1})
+    refused(r"unknown scene 'box'; built-in scenes", load_scene, "box")
+
+
+def test_step_longer_than_run():
+    refused(r"h must be in \(0, t_end\]", load_scene, "bouncing_ball", {"h": 2.0, "t_end": 1.0})
+
+
+def test_pendulum_starting_on_the_wall():
+    refused(r"starts on the wall", load_scene, "rigid_pendulum", {"angle": 0.0, "wall_x": 0.0})
+
+
+def test_toml_files(tmp_path):
+    bad_key = tmp_path / "a.toml"
+    bad_key.write_text('scene = "bouncing_ball"\n[parameters]\nmass = 1.0\nspring = 3.0\n')
+    refused(r"unknown bouncing_ball parameter key 'spring'", load_scene, bad_key)
+    bad_top = tmp_path / "b.toml"
+    bad_top.write_text('scene = "bouncing_ball"\n[solvers]\nh = 1.0\n')
+    refused(r"unknown top-level key 'solvers'", load_scene, bad_top)
+    no_scene = tmp_path / "c.toml"
+    no_scene.write_text("[parameters]\nmass = 1.0\n")
+    refused(r"missing key 'scene'", load_scene, no_scene)
+    refused(r"does not exist", load_scene, tmp_path / "missing.toml")
+    bad_value = tmp_path / "d.toml"
+    bad_value.write_text('scene = "impacting_bar"\n[solver]\nrho_inf = 3.0\n')
+    refused(r"rho_inf must be in \[0, 1\]", load_scene, bad_value)
+
+
+# ------------------------------------------------------------------ Python API
+
+BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.5)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"h": -1e-3}, r"h must be in \(0, inf\)"),
+        ({"h": 0.0}, r"h must be in \(0, inf\)"),
+        ({"h": math.nan}, r"h must be finite"),
+        ({"h": 2.0}, r"h must be in \(0, t1 - t0\]"),
+        ({"t1": -1.0}, r"t1 must be finite and greater than t0"),
+        ({"q0": [-0.01]}, r"initial penetration: gap 0 is -0.01"),
+        ({"q0": [math.nan]}, r"q0 must be finite"),
+        ({"v0": [math.inf]}, r"v0 must be finite"),
+        ({"q0": [1.0, 2.0]}, r"q0 must have shape \(1,\)"),
+        ({"scheme": nj.DS(rho_inf=1.2)}, r"rho_inf must be in \[0, 1\]"),
+        ({"scheme": nj.DS(rho_inf=math.nan)}, r"rho_inf must be in \[0, 1\]"),
+        ({"scheme": nj.DS(tol_r=-1.0)}, r"tol_r must be in \(0, inf\)"),
+        ({"scheme": nj.DS(max_iter=0)}, r"max_iter must be an integer >= 1"),
+    ],
+)
+def test_simulate_arguments_are_checked(kwargs, match):
+    args = {"model": BALL, "scheme": nj.DS(), "t0": 0.0, "t1": 1.0, "h": 1e-3, "q0": [1.0], "v0": [0.0]}
+    args.update(kwargs)
+    refused(match, nj.simulate, **args)
+
+
+def test_bilateral_violation_at_start_is_refused():
+    pendulum = nj.RigidPendulum(m=1.0, length=1.0, gravity=9.81, wall_x=-0.5, side=1.0, e=0.5)
+    refused(r"violates bilateral constraint 0", nj.simulate, pendulum, nj.DS(), 0.0, 1.0, 1e-3,
+            np.array([0.0, -1.2]), np.zeros(2))
