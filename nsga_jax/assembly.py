@@ -85,6 +85,11 @@ class ElementGroup(eqx.Module):
         Ce = -jax.vmap(jax.jacfwd(fn, argnums=1))(self.gather(q), self.gather(v), self.params)
         return scatter_matrix(self.dofs, Ke, n), scatter_matrix(self.dofs, Ce, n)
 
+    def matrix_product(self, fn: Callable[[Any], jax.Array], x: Vector) -> Vector:
+        """Assembled ``sum_e fn(params_e) @ x_e`` without forming the global matrix."""
+        ye = jax.vmap(lambda p, xe: fn(p) @ xe)(self.params, self.gather(x))
+        return scatter_vector(self.dofs, ye, x.shape[0])
+
     def matrix(self, fn: Callable[[Any], jax.Array], n: int) -> Matrix:
         """Assembled element matrices ``fn(params_e)`` (e.g. mass), shape (n, n)."""
         return scatter_matrix(self.dofs, jax.vmap(fn)(self.params), n)

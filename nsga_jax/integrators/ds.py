@@ -136,13 +136,14 @@ def _tangents(model: Model, ops: Operators, q: Vector, v: Vector, t: Scalar):
     if ops.K is not None:
         return ops.K, ops.C, ops.K_norm, ops.C_norm
     K, C = model.tangents(q, v, t)
+    if not model.velocity_dependent_force:
+        C = jnp.zeros_like(K)
     return K, C, jnp.linalg.norm(K), jnp.linalg.norm(C)
 
 
-def _force_change(model: Model, ops: Operators, q, v, q_ref, v_ref, f_ref, t) -> Vector:
-    """f(q, v, t) - f(q_ref, v_ref, t); exact (no cancellation) for a linear force."""
-    if ops.K is not None:
-        return -(ops.K @ (q - q_ref)) - ops.C @ (v - v_ref)
+def _force_change(model: Model, q, v, f_ref, t) -> Vector:
+    """f(q, v, t) - f_ref. Evaluating f (element assembly, O(n)) is cheaper than a
+    dense tangent product; the round-off it leaves is what the Newton floor covers."""
     return model.force(q, v, t) - f_ref
 
 
@@ -280,9 +281,8 @@ def smooth_motion(
 
     def residual(x):
         v, vd, q, lam = x
-        M = _mass(model, ops, q)
         f = model.force(q, v, t)
-        inertia = M @ vd
+        inertia = model.mass_product(q, vd)
         if nb == 0:
             r = inertia - f
             return Residual(r, convergence_bound([inertia, f], tol_r, tol_f), jnp.zeros((0,)))
@@ -347,11 +347,10 @@ def position_correction(
     nb, nc = model.n_bilateral, model.n_constraints
     kp = pp = _Scaling.of(model, h).kp
     unilateral = _is_unilateral(model)
-    Mt = _mass(model, ops, smooth.q)
     GB_smooth = _bilateral_jacobian(model, smooth.q) if (nb and ops.G is None) else None
 
     def f_p(q, G):
-        fp = _force_change(model, ops, q, smooth.v, smooth.q, smooth.v, f_smooth, t)
+        fp = _force_change(model, q, smooth.v, f_smooth, t)
         if GB_smooth is not None:
             fp = fp + (G[:nb] - GB_smooth).T @ smooth.lam  # (g_q^T - g̃_q^T) λ̃, eq. 29
         return fp
@@ -363,7 +362,7 @@ def position_correction(
         G = _jacobian(model, ops, q)
         xi = kp * nu - pp * g
         active = ~unilateral | (xi >= 0)
-        inertia = Mt @ U
+        inertia = model.mass_product(smooth.q, U)
         force = h**2 * f_p(q, G)
         reaction = G.T @ jnp.where(active, xi, 0.0)
         r2 = jnp.where(active, -kp * g, -(kp**2 / pp) * nu)
@@ -382,6 +381,7 @@ def position_correction(
         else:
             # -d(g_q^{A T} ξ^A)/dq - h² df^p/dq, penalty term left to solve_bordered
             mu = jnp.where(active, xi, 0.0) + h**2 * _pad_bilateral(model, smooth.lam)
+            Mt = _mass(model, ops, smooth.q)
             solve = dense_solve(Mt + h**2 * K - _curvature(model, q, mu))
         n = model.n_dof
         dU, dnu = solve_bordered(
@@ -426,7 +426,6 @@ def velocity_jump(
     kv = pv = _Scaling.of(model, h).kv
     unilateral = _is_unilateral(model)
     q = smooth.q + position.U
-    Mq = _mass(model, ops, q)
     G = _jacobian(model, ops, q)
     e = jnp.concatenate([jnp.zeros((nb,)), jnp.asarray(model.restitution, dtype=q.dtype)])
     restituted = e * G_prev_v_prev
@@ -434,8 +433,10 @@ def velocity_jump(
     f_const = jnp.zeros_like(q)
     if nb and ops.G is None:
         f_const = f_const + (G[:nb] - _bilateral_jacobian(model, smooth.q)).T @ smooth.lam
-    if ops.M is None:
-        f_const = f_const - (Mq - model.mass(smooth.q)) @ smooth.vd
+    if not model.constant_mass:
+        f_const = f_const - (model.mass_product(q, smooth.vd) - model.mass_product(smooth.q, smooth.vd))
+    if not model.velocity_dependent_force:  # f(q, v) - f(q̃, ṽ) does not change with W
+        f_const = f_const + _force_change(model, q, smooth.v, f_smooth, t)
 
     def residual(x):
         W, Lam = x
@@ -443,8 +444,11 @@ def velocity_jump(
         gdot = G @ v + restituted
         sigma = kv * Lam - pv * gdot
         active = position.active & (~unilateral | (sigma >= 0))
-        inertia = Mq @ W
-        force = h * (_force_change(model, ops, q, v, smooth.q, smooth.v, f_smooth, t) + f_const)
+        inertia = model.mass_product(q, W)
+        f_star = f_const
+        if model.velocity_dependent_force:
+            f_star = f_star + _force_change(model, q, v, f_smooth, t)
+        force = h * f_star
         reaction = G.T @ jnp.where(active, sigma, 0.0)
         r2 = jnp.where(active, -kv * gdot, -(kv**2 / pv) * Lam)
         r = jnp.concatenate([inertia - force - reaction, r2])
@@ -460,7 +464,7 @@ def velocity_jump(
         if ops.velocity_inv is not None:
             solve = inverse_solve(ops.velocity_inv)
         else:
-            solve = dense_solve(Mq + h * C)
+            solve = dense_solve(_mass(model, ops, q) + h * C)
         n = model.n_dof
         dW, dLam = solve_bordered(
             solve, res.r[:n], res.r[n:], G, G, active, kv, pv, ops.velocity_inv_Gt
@@ -547,7 +551,7 @@ class DS(eqx.Module):
             resid = [smooth.newton.residual_norm, jnp.zeros(()), jnp.zeros(())]
             tols = [smooth.newton.tolerance, jnp.zeros(()), jnp.zeros(())]
         else:
-            f_smooth = model.force(smooth.q, smooth.v, t) if ops.K is None else None
+            f_smooth = model.force(smooth.q, smooth.v, t)
             # 2. position correction (never sees W)
             position = position_correction(model, ops, tol, t, h, smooth, f_smooth)
             # 3. velocity jump

@@ -39,6 +39,7 @@ class ElasticBar(Model):
     n_unilateral = 1
     constant_mass = True
     linear_force = True
+    velocity_dependent_force = False
     linear_constraints = True
 
     @property
@@ -57,9 +58,15 @@ class ElasticBar(Model):
         params = (self.E * self.area * ones, self.length / ne * ones, self.rho * self.area * ones)
         return ElementGroup(dofs=dofs, params=params)
 
+    @property
+    def _element_mass(self):
+        return bar_lumped_mass if self.lumped else bar_consistent_mass
+
     def mass(self, q: Vector) -> Matrix:
-        fn = bar_lumped_mass if self.lumped else bar_consistent_mass
-        return self.elements.matrix(fn, self.n_dof)
+        return self.elements.matrix(self._element_mass, self.n_dof)
+
+    def mass_product(self, q: Vector, x: Vector) -> Vector:
+        return self.elements.matrix_product(self._element_mass, x)
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
         return self.elements.forces(bar_internal_force, q, v, self.n_dof)

@@ -73,6 +73,12 @@ class Model(eqx.Module):
         return False
 
     @property
+    def velocity_dependent_force(self) -> bool:
+        """``False`` when f does not depend on v (no damping, no gyroscopic terms):
+        C = 0 is then never formed and f* is evaluated once per velocity sub-problem."""
+        return True
+
+    @property
     def linear_constraints(self) -> bool:
         """``True`` when every constraint is affine in q (constant g_q)."""
         return False
@@ -86,6 +92,11 @@ class Model(eqx.Module):
     @abc.abstractmethod
     def mass(self, q: Vector) -> Matrix:
         """Mass matrix M(q), shape (n, n) [kg or kg m²]."""
+
+    def mass_product(self, q: Vector, x: Vector) -> Vector:
+        """M(q) @ x, shape (n,). Element models override it with a matrix-free
+        element-level product (O(n) instead of a dense O(n²) product)."""
+        return self.mass(q) @ x
 
     @abc.abstractmethod
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:

@@ -29,6 +29,7 @@ class BouncingBall(Model):
     n_unilateral = 1
     constant_mass = True
     linear_force = True
+    velocity_dependent_force = False
     linear_constraints = True
 
     @property
@@ -37,6 +38,9 @@ class BouncingBall(Model):
 
     def mass(self, q: Vector) -> Matrix:
         return self.m * jnp.eye(1, dtype=q.dtype)
+
+    def mass_product(self, q: Vector, x: Vector) -> Vector:
+        return self.m * x
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
         return -self.m * self.gravity * jnp.ones_like(q)
@@ -73,6 +77,7 @@ class RigidPendulum(Model):
     n_unilateral = 1
     constant_mass = True
     linear_force = True
+    velocity_dependent_force = False
 
     @property
     def mbar(self) -> Scalar:
@@ -80,6 +85,9 @@ class RigidPendulum(Model):
 
     def mass(self, q: Vector) -> Matrix:
         return self.m * jnp.eye(2, dtype=q.dtype)
+
+    def mass_product(self, q: Vector, x: Vector) -> Vector:
+        return self.m * x
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
         return jnp.stack([jnp.zeros(()), -self.m * self.gravity]).astype(q.dtype)
