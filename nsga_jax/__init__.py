@@ -13,6 +13,8 @@ from .integrators.ds import DS, StepOutput, StepState  # noqa: E402
 from .models import BouncingBall, ElasticBar, Model, RigidPendulum  # noqa: E402
 from .results import ConfigError, ConvergenceError, Result  # noqa: E402
 from ._simulate import Solution, simulate  # noqa: E402
+from . import scenes  # noqa: E402
+from .scenes import load_scene  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -30,4 +32,6 @@ __all__ = [
     "ConvergenceError",
     "Solution",
     "simulate",
+    "scenes",
+    "load_scene",
 ]

@@ -8,7 +8,8 @@ early on a failure when ``throw=True``.
 
 Compile time is measured apart (``lower().compile()``); ``wall_time`` is the
 execution time of the constant-operator preparation, the initialisation and
-all chunks.
+all chunks (until their results are ready; copying them to NumPy is not
+counted).
 """
 
 from __future__ import annotations
@@ -280,8 +281,9 @@ def simulate(
     for k in range(n_chunks):
         tw = time.perf_counter()
         carry, (out, done) = run(model, scheme, ops, carry, *consts, length)
-        out, done = jax.device_get((out, done))
+        jax.block_until_ready((carry, out, done))
         wall += time.perf_counter() - tw
+        out, done = jax.device_get((out, done))
         out = jax.tree_util.tree_map(lambda x: x[done], out)
         chunks.append(out)
         if on_chunk is not None:

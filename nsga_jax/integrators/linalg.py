@@ -43,6 +43,8 @@ def dense_solve(matrix: jax.Array) -> Solve:
 
 def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
     """Solve ``D[a, a] x[a] = rhs[a]``; x is zero on inactive rows."""
+    if D.shape[0] == 1:  # one constraint: a division (an LU call costs more here)
+        return jnp.where(active, rhs / jnp.where(active, D[0], 1.0), 0.0)
     both = active[:, None] & active[None, :]
     Dm = jnp.where(both, D, jnp.eye(D.shape[0], dtype=D.dtype))
     return jnp.where(active, jnp.linalg.solve(Dm, jnp.where(active, rhs, 0.0)), 0.0)
