@@ -26,7 +26,6 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import nsga_jax as nj  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
 CASES = [
@@ -89,7 +88,7 @@ def main() -> None:
                  "us_per_step": floor, "compile_s": float("nan"), "linear_solves_mean": 3.0})
 
     device = f"{jax.devices()[0].platform} ({platform.processor() or platform.machine()}, {os.cpu_count()} cores)"
-    header = f"| case | h [s] | steps | µs/step | compile [s] | linear solves/step |\n|---|---|---|---|---|---|"
+    header = "| case | h [s] | steps | µs/step | compile [s] | linear solves/step |\n|---|---|---|---|---|---|"
     lines = [header] + [
         f"| {r['case']} | {r['h']:g} | {r['n_steps']} | {r['us_per_step']:.1f} | "
         f"{r['compile_s']:.2f} | {r['linear_solves_mean']:.2f} |" for r in rows

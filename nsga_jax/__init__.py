@@ -8,12 +8,12 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+from . import scenes  # noqa: E402
+from ._simulate import Solution, simulate  # noqa: E402
 from .integrators.coefficients import GenAlphaCoefficients  # noqa: E402
 from .integrators.ds import DS, StepOutput, StepState  # noqa: E402
 from .models import BouncingBall, ElasticBar, Model, RigidPendulum  # noqa: E402
 from .results import ConfigError, ConvergenceError, Result  # noqa: E402
-from ._simulate import Solution, simulate  # noqa: E402
-from . import scenes  # noqa: E402
 from .scenes import load_scene  # noqa: E402
 
 __version__ = "0.1.0"

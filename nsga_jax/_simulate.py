@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .integrators.ds import DS, StepOutput, StepState
+from .integrators.ds import DS, StepOutput
 from .models.base import Model
 from .results import ConfigError, ConvergenceError, Result
 

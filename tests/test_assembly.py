@@ -4,11 +4,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import GenericBar
 
 import nsga_jax as nj
 from nsga_jax.elements import bar_internal_force
-
-from helpers import GenericBar
 
 BAR = dict(E=900.0, rho=1.0, area=1.0, length=10.0, gap0=5.005, e=0.0, n_elements=20)
 

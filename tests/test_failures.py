@@ -3,11 +3,10 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import Oscillator
 
 import nsga_jax as nj
 from nsga_jax.scenes import load_scene
-
-from helpers import Oscillator
 
 
 def test_iteration_cap_raises_a_named_error():

@@ -4,11 +4,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import Oscillator
 
 import nsga_jax as nj
 from nsga_jax.metrics import observed_order
-
-from helpers import Oscillator
 
 
 def test_coefficients_match_eq35():

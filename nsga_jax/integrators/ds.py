@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, ScalarLike, Vector
+from .._util import as_float
 from ..models.base import Model
 from ..results import Result
 from .coefficients import GenAlphaCoefficients
@@ -321,6 +322,22 @@ def smooth_motion(
     return SmoothMotion(q=q, v=v, vd=vd, lam=sol.aux, newton=sol)
 
 
+def _augmented_residual(inertia, force, G, c, mu, k, p, candidates, unilateral, tol_r, tol_f):
+    """Residual of a projection sub-problem (eqs. 37 and 42), shared by steps 2 and 3.
+
+    With the augmented multiplier ``aug = k mu - p c`` and the active set
+    ``candidates ∩ (bilateral ∪ {aug >= 0})``:
+    ``[inertia - force - G^T aug_active;  -k c (active);  -(k²/p) mu (inactive)]``.
+    Returns the :class:`Residual` with ``aux = (active, aug)``.
+    """
+    aug = k * mu - p * c
+    active = candidates & (~unilateral | (aug >= 0))
+    reaction = G.T @ jnp.where(active, aug, 0.0)
+    r2 = jnp.where(active, -k * c, -(k**2 / p) * mu)
+    r = jnp.concatenate([inertia - force - reaction, r2])
+    return Residual(r, convergence_bound([inertia, force, reaction, r2], tol_r, tol_f), (active, aug))
+
+
 class PositionCorrection(eqx.Module):
     U: Vector
     nu: jax.Array  # physical ν on A (nc,)
@@ -360,15 +377,11 @@ def position_correction(
         q = smooth.q + U
         g = model.constraints(q)
         G = _jacobian(model, ops, q)
-        xi = kp * nu - pp * g
-        active = ~unilateral | (xi >= 0)
-        inertia = model.mass_product(smooth.q, U)
-        force = h**2 * f_p(q, G)
-        reaction = G.T @ jnp.where(active, xi, 0.0)
-        r2 = jnp.where(active, -kp * g, -(kp**2 / pp) * nu)
-        r = jnp.concatenate([inertia - force - reaction, r2])
-        bound = convergence_bound([inertia, force, reaction, r2], tol_r, tol_f)
-        return Residual(r, bound, (active, xi, g, G))
+        res = _augmented_residual(
+            model.mass_product(smooth.q, U), h**2 * f_p(q, G), G, g, nu, kp, pp,
+            True, unilateral, tol_r, tol_f,
+        )
+        return res._replace(aux=res.aux + (g, G))
 
     def update(x, res):
         U, nu = x
@@ -442,18 +455,14 @@ def velocity_jump(
         W, Lam = x
         v = smooth.v + W
         gdot = G @ v + restituted
-        sigma = kv * Lam - pv * gdot
-        active = position.active & (~unilateral | (sigma >= 0))
-        inertia = model.mass_product(q, W)
         f_star = f_const
         if model.velocity_dependent_force:
             f_star = f_star + _force_change(model, q, v, f_smooth, t)
-        force = h * f_star
-        reaction = G.T @ jnp.where(active, sigma, 0.0)
-        r2 = jnp.where(active, -kv * gdot, -(kv**2 / pv) * Lam)
-        r = jnp.concatenate([inertia - force - reaction, r2])
-        bound = convergence_bound([inertia, force, reaction, r2], tol_r, tol_f)
-        return Residual(r, bound, (active, sigma, gdot))
+        res = _augmented_residual(
+            model.mass_product(q, W), h * f_star, G, gdot, Lam, kv, pv,
+            position.active, unilateral, tol_r, tol_f,
+        )
+        return res._replace(aux=res.aux + (gdot,))
 
     def update(x, res):
         W, Lam = x
@@ -493,9 +502,6 @@ def _result_code(results: list[NewtonResult]) -> jax.Array:
     return code
 
 
-def _as_float(x) -> jax.Array:
-    return jnp.asarray(x, dtype=float)
-
 
 class DS(eqx.Module):
     """Decoupled nonsmooth generalized-α (paper §3.3, Algorithm 1).
@@ -506,9 +512,9 @@ class DS(eqx.Module):
         max_iter: Newton iteration cap per sub-problem (static).
     """
 
-    rho_inf: ScalarLike = eqx.field(default=0.8, converter=_as_float)
-    tol_r: ScalarLike = eqx.field(default=1e-5, converter=_as_float)
-    tol_f: ScalarLike = eqx.field(default=1e-5, converter=_as_float)
+    rho_inf: ScalarLike = eqx.field(default=0.8, converter=as_float)
+    tol_r: ScalarLike = eqx.field(default=1e-5, converter=as_float)
+    tol_f: ScalarLike = eqx.field(default=1e-5, converter=as_float)
     max_iter: int = eqx.field(static=True, default=50)
 
     @property

@@ -8,13 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Matrix, Scalar, Vector
+from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
 from .base import Model
-
-
-def _as_float(x) -> jax.Array:
-    return jnp.asarray(x, dtype=float)
 
 
 class ElasticBar(Model):
@@ -27,12 +24,12 @@ class ElasticBar(Model):
     iteration matrices once.
     """
 
-    E: Scalar = eqx.field(converter=_as_float)
-    rho: Scalar = eqx.field(converter=_as_float)
-    area: Scalar = eqx.field(converter=_as_float)
-    length: Scalar = eqx.field(converter=_as_float)
-    gap0: Scalar = eqx.field(converter=_as_float)
-    e: Scalar = eqx.field(converter=_as_float)
+    E: Scalar = eqx.field(converter=as_float)
+    rho: Scalar = eqx.field(converter=as_float)
+    area: Scalar = eqx.field(converter=as_float)
+    length: Scalar = eqx.field(converter=as_float)
+    gap0: Scalar = eqx.field(converter=as_float)
+    e: Scalar = eqx.field(converter=as_float)
     n_elements: int = eqx.field(static=True)
     lumped: bool = eqx.field(static=True, default=False)
 

@@ -7,11 +7,8 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
+from .._util import as_float
 from .base import Model
-
-
-def _as_float(x) -> jax.Array:
-    return jnp.asarray(x, dtype=float)
 
 
 class BouncingBall(Model):
@@ -21,9 +18,9 @@ class BouncingBall(Model):
     positive); one unilateral constraint g = z >= 0 with restitution e.
     """
 
-    m: Scalar = eqx.field(converter=_as_float)
-    gravity: Scalar = eqx.field(converter=_as_float)
-    e: Scalar = eqx.field(converter=_as_float)
+    m: Scalar = eqx.field(converter=as_float)
+    gravity: Scalar = eqx.field(converter=as_float)
+    e: Scalar = eqx.field(converter=as_float)
 
     n_dof = 1
     n_unilateral = 1
@@ -65,12 +62,12 @@ class RigidPendulum(Model):
     g^U = side (x - wall_x) >= 0, side = ±1 the side where the mass starts.
     """
 
-    m: Scalar = eqx.field(converter=_as_float)
-    length: Scalar = eqx.field(converter=_as_float)
-    gravity: Scalar = eqx.field(converter=_as_float)
-    wall_x: Scalar = eqx.field(converter=_as_float)
-    side: Scalar = eqx.field(converter=_as_float)
-    e: Scalar = eqx.field(converter=_as_float)
+    m: Scalar = eqx.field(converter=as_float)
+    length: Scalar = eqx.field(converter=as_float)
+    gravity: Scalar = eqx.field(converter=as_float)
+    wall_x: Scalar = eqx.field(converter=as_float)
+    side: Scalar = eqx.field(converter=as_float)
+    e: Scalar = eqx.field(converter=as_float)
 
     n_dof = 2
     n_bilateral = 1

@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
+from .._simulate import Solution, simulate
 from ..integrators.ds import DS
 from ..models.base import Model
 from ..results import ConfigError
-from .._simulate import Solution, simulate
 from .params import SOLVER_PARAMS, Param, check_all
 
 

@@ -25,17 +25,17 @@ PARAMETERS = {
 
 
 def build(p, solver) -> Scene:
-    l, th, om = p["length"], p["angle"], p["omega"]
-    q0 = np.array([l * math.sin(th), -l * math.cos(th)])
-    v0 = l * om * np.array([math.cos(th), math.sin(th)])
+    length, th, om = p["length"], p["angle"], p["omega"]
+    q0 = np.array([length * math.sin(th), -length * math.cos(th)])
+    v0 = length * om * np.array([math.cos(th), math.sin(th)])
     offset = q0[0] - p["wall_x"]
-    if abs(offset) <= 1e-12 * max(1.0, l):
+    if abs(offset) <= 1e-12 * max(1.0, length):
         raise ConfigError(
             f"the mass starts on the wall (x = wall_x = {p['wall_x']}): the admissible side is "
             "undefined; move the wall or change the initial angle"
         )
     side = math.copysign(1.0, offset)
-    model = RigidPendulum(m=p["mass"], length=l, gravity=p["gravity"], wall_x=p["wall_x"], side=side, e=p["e"])
+    model = RigidPendulum(m=p["mass"], length=length, gravity=p["gravity"], wall_x=p["wall_x"], side=side, e=p["e"])
 
     def observe(sol):
         x, y, vx, vy = sol.q[:, 0], sol.q[:, 1], sol.v[:, 0], sol.v[:, 1]
@@ -43,7 +43,7 @@ def build(p, solver) -> Scene:
         return {
             "x": x, "y": y, "vx": vx, "vy": vy,
             "gap": side * (x - p["wall_x"]),
-            "constraint": np.hypot(x, y) - l,
+            "constraint": np.hypot(x, y) - length,
             "force": sol.impulse[:, 1] / sol.h,
             "energy": energy,
         }
