@@ -79,11 +79,18 @@ class ElementGroup(eqx.Module):
         fe = jax.vmap(fn)(self.gather(q), self.gather(v), self.params)
         return scatter_vector(self.dofs, fe, n)
 
-    def tangents(self, fn: ElementForce, q: Vector, v: Vector, n: int) -> tuple[Matrix, Matrix]:
-        """Assembled K = -df/dq and C = -df/dv from element-level ``jacfwd``."""
-        Ke = -jax.vmap(jax.jacfwd(fn, argnums=0))(self.gather(q), self.gather(v), self.params)
-        Ce = -jax.vmap(jax.jacfwd(fn, argnums=1))(self.gather(q), self.gather(v), self.params)
-        return scatter_matrix(self.dofs, Ke, n), scatter_matrix(self.dofs, Ce, n)
+    def tangents(
+        self, fn: ElementForce, q: Vector, v: Vector, n: int, velocity_dependent: bool = True
+    ) -> tuple[Matrix, Matrix]:
+        """Assembled K = -df/dq and C = -df/dv from element-level ``jacfwd``
+        (C is not formed, and returned as zeros, when ``velocity_dependent`` is False)."""
+        xe, ve = self.gather(q), self.gather(v)
+        Ke = -jax.vmap(jax.jacfwd(fn, argnums=0))(xe, ve, self.params)
+        K = scatter_matrix(self.dofs, Ke, n)
+        if not velocity_dependent:
+            return K, jnp.zeros_like(K)
+        Ce = -jax.vmap(jax.jacfwd(fn, argnums=1))(xe, ve, self.params)
+        return K, scatter_matrix(self.dofs, Ce, n)
 
     def matrix_product(self, fn: Callable[[Any], jax.Array], x: Vector) -> Vector:
         """Assembled ``sum_e fn(params_e) @ x_e`` without forming the global matrix."""

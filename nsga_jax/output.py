@@ -70,7 +70,7 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, P
 
 
 def plot_observables(sol: Solution, path: Path, title: str = "") -> Path:
-    names = list(sol.observables)
+    names = [k for k, v in sol.observables.items() if np.ndim(v) == 1]
     ncols = 2 if len(names) > 1 else 1
     nrows = -(-len(names) // ncols)
     fig, axes = plt.subplots(nrows, ncols, figsize=(6.0 * ncols, 2.3 * nrows), squeeze=False, sharex=True)

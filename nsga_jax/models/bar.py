@@ -69,7 +69,7 @@ class ElasticBar(Model):
         return self.elements.forces(bar_internal_force, q, v, self.n_dof)
 
     def tangents(self, q: Vector, v: Vector, t: Scalar) -> tuple[Matrix, Matrix]:
-        return self.elements.tangents(bar_internal_force, q, v, self.n_dof)
+        return self.elements.tangents(bar_internal_force, q, v, self.n_dof, velocity_dependent=False)
 
     def unilateral(self, q: Vector) -> jax.Array:
         return (self.gap0 - q[-1])[None]

@@ -1,6 +1,13 @@
 """Built-in scenes and config loading."""
 
-from . import bouncing_ball, impacting_bar, rigid_pendulum  # noqa: F401  (registration)
+from . import (  # noqa: F401  (registration)
+    bouncing_ball,
+    flexible_cube,
+    flexible_pendulum,
+    impacting_bar,
+    rigid_box,
+    rigid_pendulum,
+)
 from .base import REGISTRY, Scene, SceneSpec, load_scene, parse_override
 from .params import SOLVER_PARAMS, Param
 

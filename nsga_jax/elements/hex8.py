@@ -1,0 +1,109 @@
+"""Trilinear hexahedron, total Lagrangian, St Venant–Kirchhoff material.
+
+Element coordinates ``x_e`` (24,): current positions of the 8 nodes, node-major
+(``x_e[3 a + i]``); parameters ``p = (dNdX, dV, lam, mu, rho)``: the reference
+shape-function gradients at the Gauss points (8, 8, 3) and the Gauss weights
+times det(dX/dξ) (8,) [m³] -- both from :func:`hex8_geometry`, computed once
+from the reference node positions -- the Lamé constants [Pa] and the density
+[kg/m³]. Node order: (-,-,-), (+,-,-), (+,+,-), (-,+,-), then the same at
+ζ = +1. Full 2×2×2 Gauss integration.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+_CORNERS = np.array(
+    [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1], [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]],
+    dtype=float,
+)
+_G = 1.0 / np.sqrt(3.0)
+GAUSS_POINTS = _CORNERS * _G  # (8, 3); all weights are 1
+
+
+def shape_functions(xi: jax.Array) -> jax.Array:
+    """N_a(ξ), shape (8,)."""
+    return jnp.prod(1.0 + _CORNERS * xi, axis=1) / 8.0
+
+
+def shape_gradients(xi: jax.Array) -> jax.Array:
+    """dN_a/dξ_j, shape (8, 3)."""
+    return jax.jacfwd(shape_functions)(xi)
+
+
+def hex8_geometry(X_e: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Reference geometry of an element with nodes X_e (8, 3): dN/dX at each Gauss
+    point (8, 8, 3) and the integration weights det(dX/dξ) (8,) [m³]."""
+    dN = jax.vmap(shape_gradients)(jnp.asarray(GAUSS_POINTS))  # (gp, a, j)
+    J = jnp.einsum("ai,gaj->gij", X_e, dN)  # dX_i/dξ_j
+    dNdX = jnp.einsum("gaj,gji->gai", dN, jnp.linalg.inv(J))
+    return dNdX, jnp.linalg.det(J)
+
+
+def element_volume(X_e: jax.Array) -> jax.Array:
+    """Reference volume [m³] of the element with node positions X_e (8, 3)."""
+    return jnp.sum(hex8_geometry(X_e)[1])
+
+
+def svk_energy(x_e: jax.Array, p) -> jax.Array:
+    """Strain energy [J]: Σ_gp (λ/2 (tr E)² + μ E:E) dV, E = (FᵀF - I)/2."""
+    dNdX, dV, lam, mu, _ = p
+    F = jnp.einsum("ai,gaj->gij", x_e.reshape(8, 3), dNdX)
+    E = 0.5 * (jnp.einsum("gki,gkj->gij", F, F) - jnp.eye(3))
+    trE = jnp.trace(E, axis1=1, axis2=2)
+    W = 0.5 * lam * trE**2 + mu * jnp.sum(E * E, axis=(1, 2))
+    return jnp.sum(W * dV)
+
+
+def hex8_internal_force(x_e: jax.Array, v_e: jax.Array, p) -> jax.Array:
+    """Internal force (24,) = -dU/dx_e [N]."""
+    return -jax.grad(svk_energy)(x_e, p)
+
+
+def _gauss_shape_functions() -> jax.Array:
+    return jax.vmap(shape_functions)(jnp.asarray(GAUSS_POINTS))  # (gp, a)
+
+
+def hex8_mass(p) -> jax.Array:
+    """Consistent mass matrix (24, 24) [kg]."""
+    _, dV, _, _, rho = p
+    N = _gauss_shape_functions()
+    return jnp.kron(rho * jnp.einsum("g,ga,gb->ab", dV, N, N), jnp.eye(3))
+
+
+def hex8_body_force(p, acceleration: jax.Array) -> jax.Array:
+    """Consistent nodal load (24,) of a uniform body acceleration (3,) [m/s²] (gravity)."""
+    _, dV, _, _, rho = p
+    return jnp.kron(rho * jnp.einsum("g,ga->a", dV, _gauss_shape_functions()), acceleration)
+
+
+def lame(E: jax.Array, nu: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Lamé constants (λ, μ) from Young's modulus and Poisson's ratio."""
+    return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), E / (2.0 * (1.0 + nu))
+
+
+def structured_hex_mesh(sides, divisions, origin=(0.0, 0.0, 0.0)):
+    """Nodes (N, 3) and connectivity (E, 8) of a box meshed with nx × ny × nz hexahedra.
+
+    Node index ``i + (nx+1) (j + (ny+1) k)`` for grid indices (i, j, k).
+    """
+    nx, ny, nz = divisions
+    axes = [np.linspace(o, o + s, n + 1) for o, s, n in zip(origin, sides, divisions)]
+    k, j, i = np.meshgrid(np.arange(nz + 1), np.arange(ny + 1), np.arange(nx + 1), indexing="ij")
+    nodes = np.stack([axes[0][i.ravel()], axes[1][j.ravel()], axes[2][k.ravel()]], axis=1)
+
+    def index(i, j, k):
+        return i + (nx + 1) * (j + (ny + 1) * k)
+
+    elements = []
+    for kk in range(nz):
+        for jj in range(ny):
+            for ii in range(nx):
+                elements.append([
+                    index(ii, jj, kk), index(ii + 1, jj, kk), index(ii + 1, jj + 1, kk), index(ii, jj + 1, kk),
+                    index(ii, jj, kk + 1), index(ii + 1, jj, kk + 1), index(ii + 1, jj + 1, kk + 1),
+                    index(ii, jj + 1, kk + 1),
+                ])
+    return nodes, np.asarray(elements, dtype=np.int64)

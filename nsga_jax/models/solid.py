@@ -1,0 +1,105 @@
+"""A 3D solid of trilinear hexahedra (St Venant–Kirchhoff), falling on a floor."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Matrix, Scalar, Vector
+from .._util import as_float
+from ..assembly import ElementGroup, StaticIndex
+from ..elements.hex8 import hex8_body_force, hex8_geometry, hex8_internal_force, hex8_mass, lame, svk_energy
+from .base import Model
+
+
+class HexSolid(Model):
+    """A mesh of hex8 elements; coordinates are the current nodal positions
+    (n = 3 × nodes, node-major), gravity along -z, and node–plane contacts
+    ``z_node - floor_z >= 0`` at the ``contact_nodes``.
+
+    Attributes:
+        reference_nodes: reference positions (N, 3) [m].
+        connectivity: element-to-node map (E, 8), static.
+        contact_nodes: node indices in contact with the floor (static).
+        E, nu, rho: Young's modulus [Pa], Poisson's ratio, density [kg/m³].
+        gravity [m/s²], floor_z [m], e: restitution (shared by every contact).
+    """
+
+    reference_nodes: jax.Array = eqx.field(converter=as_float)
+    E: Scalar = eqx.field(converter=as_float)
+    nu: Scalar = eqx.field(converter=as_float)
+    rho: Scalar = eqx.field(converter=as_float)
+    gravity: Scalar = eqx.field(converter=as_float)
+    floor_z: Scalar = eqx.field(converter=as_float)
+    e: Scalar = eqx.field(converter=as_float)
+    connectivity: StaticIndex = eqx.field(static=True)
+    contact_nodes: StaticIndex = eqx.field(static=True)
+
+    constant_mass = True
+    velocity_dependent_force = False
+    linear_constraints = True
+
+    @property
+    def n_nodes(self) -> int:
+        return self.reference_nodes.shape[0]
+
+    @property
+    def n_dof(self) -> int:
+        return 3 * self.n_nodes
+
+    @property
+    def n_unilateral(self) -> int:
+        return self.contact_nodes.shape[0]
+
+    @property
+    def elements(self) -> ElementGroup:
+        conn = self.connectivity.array
+        dofs = StaticIndex((3 * conn[:, :, None] + np.arange(3)[None, None, :]).reshape(len(conn), 24))
+        lam, mu = lame(self.E, self.nu)
+        ne = len(conn)
+        dNdX, dV = jax.vmap(hex8_geometry)(self.reference_nodes[conn])
+        params = (dNdX, dV, lam * jnp.ones(ne), mu * jnp.ones(ne), self.rho * jnp.ones(ne))
+        return ElementGroup(dofs=dofs, params=params)
+
+    @property
+    def mbar(self) -> Scalar:
+        """Total mass ρ V [kg]."""
+        return self.rho * jnp.sum(self.elements.params[1])
+
+    def reference(self) -> Vector:
+        return self.reference_nodes.reshape(-1)
+
+    def mass(self, q: Vector) -> Matrix:
+        return self.elements.matrix(hex8_mass, self.n_dof)
+
+    def mass_product(self, q: Vector, x: Vector) -> Vector:
+        return self.elements.matrix_product(hex8_mass, x)
+
+    def external_force(self) -> Vector:
+        g = jnp.array([0.0, 0.0, -1.0]) * self.gravity
+        group = self.elements
+        fe = jax.vmap(lambda p: hex8_body_force(p, g))(group.params)
+        return jnp.zeros((self.n_dof,)).at[group.dofs.array].add(fe)
+
+    def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
+        return self.elements.forces(hex8_internal_force, q, v, self.n_dof) + self.external_force()
+
+    def tangents(self, q: Vector, v: Vector, t: Scalar) -> tuple[Matrix, Matrix]:
+        return self.elements.tangents(hex8_internal_force, q, v, self.n_dof, velocity_dependent=False)
+
+    def unilateral(self, q: Vector) -> jax.Array:
+        return q.reshape(-1, 3)[self.contact_nodes.array, 2] - self.floor_z
+
+    @property
+    def restitution(self) -> jax.Array:
+        return jnp.full((self.n_unilateral,), self.e)
+
+    def strain_energy(self, q: Vector) -> Scalar:
+        group = self.elements
+        return jnp.sum(jax.vmap(svk_energy)(group.gather(q), group.params))
+
+    def energy(self, q: Vector, v: Vector) -> Scalar:
+        """Kinetic + strain + gravitational energy [J]."""
+        return 0.5 * v @ self.mass_product(q, v) + self.strain_energy(q) - self.external_force() @ q
