@@ -236,7 +236,8 @@ def simulate(
         throw: stop at the first step that fails (Newton cap or NaN/inf) and
             raise :class:`ConvergenceError`; with ``False`` keep going and
             mark failed steps in ``records.result``.
-        chunk_size: steps per compiled scan (default: all, up to 4096).
+        chunk_size: steps per compiled scan (default: about a twentieth of the
+            run, between 256 and 4096 steps; every chunk reuses one compilation).
         progress: print progress on stderr after each chunk.
         on_chunk: called as ``on_chunk(k, partial)`` after chunk k with that
             chunk's records (a :class:`Solution` of the chunk alone).
@@ -257,7 +258,10 @@ def simulate(
     validate_initial_state(model, q0, v0)
 
     n_steps = _n_steps(t0, t1, h)
-    n_chunks = -(-n_steps // min(n_steps, chunk_size or DEFAULT_CHUNK))
+    if chunk_size:
+        n_chunks = -(-n_steps // chunk_size)
+    else:  # about 20 progress reports, chunks of 256 to 4096 steps
+        n_chunks = max(-(-n_steps // DEFAULT_CHUNK), min(20, -(-n_steps // 256)))
     length = -(-n_steps // n_chunks)  # equal chunks: fewer than n_chunks padded steps
 
     args0 = (model, scheme, jnp.asarray(t0), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h))

@@ -7,10 +7,14 @@ import pytest
 from nsga_jax.scenes import load_scene
 
 
-def check_clean(sol, bilateral_tol=1e-8):
+def check_clean(sol, bilateral_tol=1e-8, penetration_tol=1e-10):
+    """Every step converged; what is left of penetration and joint violation is
+    within the Newton tolerance (eq. 51 with tol_r = 1e-5 is relative: on the
+    soft cube a node that enters the active set at the last iterate can keep
+    ~1e-8 m, i.e. 1e-7 of the cube's size)."""
     stats = sol.stats
     assert stats["failed_steps"] == 0
-    assert stats["max_penetration"] <= 1e-10
+    assert stats["max_penetration"] <= penetration_tol
     assert stats["max_bilateral_violation_position"] <= bilateral_tol
     assert stats["max_bilateral_violation_velocity"] <= bilateral_tol
 
@@ -47,7 +51,7 @@ def test_flexible_cube_impact_window(h):
     # sqrt(2 g 0.3) = 2.43 m/s so that a short window covers the impact
     scene = load_scene("flexible_cube", {"h": h, "t_end": 0.006, "height": 0.0505, "velocity": -2.43})
     sol = scene.run()
-    check_clean(sol)
+    check_clean(sol, penetration_tol=1e-6 * 0.1)
     assert (sol.impulse > 0).any()
     assert sol.observables["x1_vz"][-1] > -2.43  # the bottom corner has been stopped
     assert stats_max(sol) <= 3
@@ -55,5 +59,6 @@ def test_flexible_cube_impact_window(h):
 
 @pytest.mark.slow
 def test_flexible_cube_paper_run():
-    sol = load_scene("flexible_cube", {"h": 1e-4}).run()
-    check_clean(sol)
+    sol = load_scene("flexible_cube", {"h": 1e-4}).run()  # T = 0.3 s, about 2 minutes
+    check_clean(sol, penetration_tol=1e-6 * 0.1)
+    assert sol.observables["x1_uz"].min() == pytest.approx(-0.3, abs=2e-3)  # falls onto the floor
