@@ -10,16 +10,27 @@ jax.config.update("jax_enable_x64", True)
 
 from . import scenes  # noqa: E402
 from ._simulate import Solution, simulate  # noqa: E402
+from .integrators.base import AbstractScheme, StepOutput, StepState  # noqa: E402
 from .integrators.coefficients import GenAlphaCoefficients  # noqa: E402
-from .integrators.ds import DS, StepOutput, StepState  # noqa: E402
+from .integrators.cs import CS  # noqa: E402
+from .integrators.ds import DS, DSn  # noqa: E402
+from .integrators.mj import MJ  # noqa: E402
 from .models import BouncingBall, ElasticBar, Model, RigidPendulum  # noqa: E402
 from .results import ConfigError, ConvergenceError, Result  # noqa: E402
 from .scenes import load_scene  # noqa: E402
 
+SCHEMES = {"ds": DS, "dsn": DSn, "cs": CS, "mj": MJ}
+"""Scheme classes by their command-line names."""
+
 __version__ = "0.1.0"
 
 __all__ = [
+    "AbstractScheme",
     "DS",
+    "DSn",
+    "CS",
+    "MJ",
+    "SCHEMES",
     "GenAlphaCoefficients",
     "StepOutput",
     "StepState",

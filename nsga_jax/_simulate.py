@@ -26,9 +26,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .integrators.ds import DS, StepOutput
+from .integrators.base import AbstractScheme, StepOutput
 from .models.base import Model
-from .results import ConfigError, ConvergenceError, Result
+from .results import SUBPROBLEMS, ConfigError, ConvergenceError, Result
 
 Observe = Callable[["Solution"], dict[str, np.ndarray]]
 
@@ -133,14 +133,15 @@ def _check_finite_positive(name: str, value, allow_zero: bool = False) -> float:
     return x
 
 
-def validate_scheme(scheme: DS) -> None:
-    rho = float(scheme.rho_inf)
-    if not (math.isfinite(rho) and 0.0 <= rho <= 1.0):
-        raise ConfigError(f"rho_inf must be in [0, 1], got {rho}")
+def validate_scheme(scheme: AbstractScheme) -> None:
     for name in ("tol_r", "tol_f"):
         _check_finite_positive(name, getattr(scheme, name))
     if not (isinstance(scheme.max_iter, int) and scheme.max_iter >= 1):
         raise ConfigError(f"max_iter must be an integer >= 1, got {scheme.max_iter!r}")
+    for name, (value, lo, hi) in scheme.bounds().items():
+        x = float(value)
+        if not (math.isfinite(x) and lo <= x <= hi):
+            raise ConfigError(f"{name} must be in [{lo:g}, {hi:g}], got {x}")
 
 
 def validate_initial_state(model: Model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9) -> None:
@@ -213,7 +214,7 @@ def _prepare_and_init(model, scheme, t0, q0, v0, h):
 
 def simulate(
     model: Model,
-    scheme: DS,
+    scheme: AbstractScheme,
     t0: float,
     t1: float,
     h: float,
@@ -230,7 +231,7 @@ def simulate(
 
     Args:
         model: the semi-discrete system.
-        scheme: the time integrator (e.g. ``DS(rho_inf=0.8)``).
+        scheme: the time integrator: ``DS(rho_inf=0.8)``, ``DSn()``, ``CS()`` or ``MJ(theta=0.5)``.
         t0, t1, h: start and end time and step size [s]; N = floor((t1-t0)/h) steps.
         q0, v0: initial coordinates and velocities, shape (n,).
         throw: stop at the first step that fails (Newton cap or NaN/inf) and
@@ -322,8 +323,11 @@ def simulate(
         sol.observables = {k: np.asarray(v) for k, v in observe(sol).items()}
     if throw and first_failure is not None:
         step, out, i = first_failure
-        sub = Result(int(out.result[i])).subproblem
-        j = ("smooth motion", "position correction", "velocity jump").index(sub)
+        result = Result(int(out.result[i]))
+        if result.subproblem in SUBPROBLEMS:
+            j = SUBPROBLEMS.index(result.subproblem)
+        else:  # a coupled iteration: report its worst residual
+            j = int(np.argmax(out.residual[i] / np.maximum(out.tolerance[i], 1e-300)))
         err = ConvergenceError(
             step=step,
             time=float(out.t[i]),

@@ -20,6 +20,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--h", type=float, help="step size [s]")
     run.add_argument("--t-end", type=float, help="end time [s]")
     run.add_argument("--rho-inf", type=float, help="spectral radius at infinity, in [0, 1]")
+    run.add_argument("--scheme", choices=("ds", "dsn", "cs", "mj"), help="time integration scheme")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a config key (repeatable), e.g. --set e=0.5")
     run.add_argument("--no-throw", action="store_true",
@@ -36,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _run(args) -> int:
     overrides = dict(parse_override(s) for s in args.set)
-    for key, value in (("h", args.h), ("t_end", args.t_end), ("rho_inf", args.rho_inf)):
+    for key, value in (("h", args.h), ("t_end", args.t_end), ("rho_inf", args.rho_inf), ("scheme", args.scheme)):
         if value is not None:
             overrides[key] = value
     scene = load_scene(args.scene, overrides)

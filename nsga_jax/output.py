@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ._simulate import Solution  # noqa: E402
-from .integrators.ds import StepOutput  # noqa: E402
+from .integrators.base import StepOutput  # noqa: E402
 
 RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bilateral_rate",
                  "iterations", "residual", "result")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import enum
 
 SUBPROBLEMS = ("smooth motion", "position correction", "velocity jump")
+COUPLED = "coupled iteration"
 
 
 class Result(enum.IntEnum):
@@ -20,17 +21,28 @@ class Result(enum.IntEnum):
     smooth_nonfinite = 4
     position_nonfinite = 5
     velocity_nonfinite = 6
+    coupled_max_iter = 7
+    coupled_diverged = 8
 
     @property
     def subproblem(self) -> str | None:
         if self is Result.successful:
             return None
+        if int(self) >= 7:
+            return COUPLED
         return SUBPROBLEMS[(int(self) - 1) % 3]
 
     @property
     def message(self) -> str:
         if self is Result.successful:
             return "successful"
+        if self is Result.coupled_max_iter:
+            return (
+                "the coupled (CS) iteration over the three sub-problems did not converge within the "
+                "iteration cap (reduce h, or raise max_iter)"
+            )
+        if self is Result.coupled_diverged:
+            return "the coupled (CS) iteration diverged (its residual grew without bound or became non-finite)"
         if int(self) <= 3:
             return (
                 f"Newton did not converge in the {self.subproblem} sub-problem within the "

@@ -13,7 +13,10 @@ from typing import Any
 import numpy as np
 
 from .._simulate import Solution, simulate
-from ..integrators.ds import DS
+from ..integrators.base import AbstractScheme
+from ..integrators.cs import CS
+from ..integrators.ds import DS, DSn
+from ..integrators.mj import MJ
 from ..models.base import Model
 from ..results import ConfigError
 from .params import SOLVER_PARAMS, Param, check_all
@@ -40,9 +43,9 @@ class Scene:
     solver: dict[str, Any]
     observe: Callable[[Solution], dict[str, np.ndarray]]
 
-    def scheme(self) -> DS:
-        s = self.solver
-        return DS(rho_inf=s["rho_inf"], tol_r=s["tol_r"], tol_f=s["tol_f"], max_iter=s["max_iter"])
+    def scheme(self) -> AbstractScheme:
+        """The configured scheme (``solver["scheme"]``) with its settings."""
+        return make_scheme(self.solver)
 
     def run(self, **kwargs) -> Solution:
         """Simulate from t = 0 to ``t_end`` with step ``h``; keyword arguments go to
@@ -51,6 +54,16 @@ class Scene:
             self.model, self.scheme(), 0.0, self.solver["t_end"], self.solver["h"],
             self.q0, self.v0, observe=self.observe, **kwargs,
         )
+
+
+def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
+    """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter)."""
+    common = dict(tol_r=solver["tol_r"], tol_f=solver["tol_f"], max_iter=solver["max_iter"])
+    name = solver["scheme"]
+    if name == "mj":
+        return MJ(theta=solver["theta"], **common)
+    cls = {"ds": DS, "dsn": DSn, "cs": CS}[name]
+    return cls(rho_inf=solver["rho_inf"], **common)
 
 
 @dataclass(frozen=True)

@@ -83,10 +83,12 @@ def unit_interval(default, doc) -> Param:
 
 
 SOLVER_PARAMS: dict[str, Param] = {
-    "scheme": Param("ds", "time integration scheme", kind="choice", choices=("ds",)),
+    "scheme": Param("ds", "time integration scheme: decoupled (ds), decoupled without f^p and f* (dsn), "
+                    "coupled (cs), Moreau-Jean (mj)", kind="choice", choices=("ds", "dsn", "cs", "mj")),
     "h": positive(1e-3, "step size", "s"),
     "t_end": positive(1.0, "end time (the run starts at t = 0)", "s"),
     "rho_inf": unit_interval(0.8, "spectral radius at infinity ρ∞ of generalized-α (eq. 35)"),
+    "theta": unit_interval(0.5, "θ of the Moreau-Jean scheme (mj only)"),
     "tol_r": Param(1e-5, "relative Newton tolerance of eq. 51", lo=0.0, lo_open=True, hi=1.0, hi_open=True),
     "tol_f": positive(1e-5, "reference Newton tolerance of eq. 51"),
     "max_iter": Param(50, "Newton iteration cap per sub-problem", kind="int", lo=1, hi=10_000),

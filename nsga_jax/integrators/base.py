@@ -1,0 +1,340 @@
+"""What every time-stepping scheme shares: the carried state, the per-step
+record, the constant operators of a model, and the model-facing helpers of the
+Newton sub-problems.
+
+Multipliers inside the sub-problems are scaled as in the paper (ks λ̃, kp ν,
+kv Λ are the physical values); records are physical: λ̃ [N], ν [N s²] and the
+impulse Λ [N s] (Λ/h is the mean contact force over the step).
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Matrix, Scalar, ScalarLike, Vector
+from .._util import as_float
+from ..models.base import Model
+from ..results import Result
+from .newton import NewtonResult, Residual, convergence_bound
+
+ROUNDOFF_FACTOR = 64.0
+"""The residual floor is ``ROUNDOFF_FACTOR * eps * (||K|| ||q|| + ||C|| ||v||)``
+(scaled like the residual), see :mod:`nsga_jax.integrators.newton`."""
+
+DIVERGENCE_FACTOR = 1e10
+"""A coupled iteration whose residual grows this many times beyond its start has diverged."""
+
+
+# --------------------------------------------------------------------------- data
+
+
+class StepState(eqx.Module):
+    """What a scheme carries from step to step (all float arrays).
+
+    t [s]; q, v (n,): coordinates and velocities; vd (n,): smooth acceleration
+    v̇̃; a (n,): generalized-α pseudo-acceleration (both zero for Moreau–Jean).
+    """
+
+    t: Scalar
+    q: Vector
+    v: Vector
+    vd: Vector
+    a: Vector
+
+
+class StepOutput(eqx.Module):
+    """Per-step record (stacked over steps by the time loop).
+
+    Shapes: q, v (n,); lam (nb,): smooth bilateral multipliers [N];
+    nu (nc,): position multipliers; impulse (nc,): Λ [N s] on the velocity
+    active set; gap (nu,): g^U(q_{n+1}); bilateral (nb,): g^B(q_{n+1});
+    bilateral_rate (nb,): g_q^B v_{n+1}; active_position, active_velocity (nc,);
+    iterations (3,): linear solves of the smooth, position and velocity
+    sub-problems (their sum is the step's number of linear solves);
+    residual, tolerance (3,): final residual norms and their bounds;
+    result: :class:`~nsga_jax.results.Result` code.
+    """
+
+    t: Scalar
+    q: Vector
+    v: Vector
+    lam: jax.Array
+    nu: jax.Array
+    impulse: jax.Array
+    gap: jax.Array
+    bilateral: jax.Array
+    bilateral_rate: jax.Array
+    active_position: jax.Array
+    active_velocity: jax.Array
+    iterations: jax.Array
+    residual: jax.Array
+    tolerance: jax.Array
+    result: jax.Array
+
+
+class Operators(eqx.Module):
+    """Constant pieces of a model for one step size, computed once per run.
+
+    Each field is ``None`` when the model's structure does not make it
+    constant: M (constant mass), K and C (linear force), G (affine
+    constraints), and the inverses of the iteration matrices of the smooth,
+    position and velocity sub-problems with the products A^{-1} G^T they need.
+    """
+
+    M: Matrix | None
+    K: Matrix | None
+    C: Matrix | None
+    K_norm: Scalar | None
+    C_norm: Scalar | None
+    G: jax.Array | None
+    smooth_inv: Matrix | None
+    smooth_inv_Gt: jax.Array | None
+    position_inv: Matrix | None
+    position_inv_Gt: jax.Array | None
+    velocity_inv: Matrix | None
+    velocity_inv_Gt: jax.Array | None
+
+
+TopLeft = Callable[[Matrix, Matrix, Matrix], Matrix]
+"""``(M, K, C) -> A``: the constraint-free block of an iteration matrix."""
+
+
+def constant_operators(
+    model: Model,
+    t0: Scalar,
+    smooth: TopLeft | None,
+    position: TopLeft | None,
+    velocity: TopLeft | None,
+    smooth_needs_constant_G: bool,
+    position_needs_constant_G: bool,
+    velocity_needs_constant_G: bool = False,
+) -> Operators:
+    """Evaluate what the model's structure makes constant and invert the given
+    iteration matrices when they are constant.
+
+    The smooth block couples only to the bilateral rows of g_q, the others to
+    all rows. ``*_needs_constant_G``: the matrix holds the constraint
+    curvature unless the constraints are affine, so it is constant only then.
+    """
+    n, nb, nc = model.n_dof, model.n_bilateral, model.n_constraints
+    zeros = jnp.zeros((n,))
+    M = model.mass(zeros) if model.constant_mass else None
+    K = C = K_norm = C_norm = None
+    if model.linear_force:
+        K, C = model.tangents(zeros, zeros, t0)
+        if not model.velocity_dependent_force:
+            C = jnp.zeros_like(K)
+        K_norm, C_norm = jnp.linalg.norm(K), jnp.linalg.norm(C)
+    G = model.constraint_jacobian(zeros) if (model.linear_constraints and nc > 0) else None
+
+    def invert(top_left, needs_G, rows):
+        if top_left is None or M is None or K is None or (needs_G and G is None):
+            return None, None
+        inv = jnp.linalg.inv(top_left(M, K, C))
+        inv_Gt = inv @ G[rows].T if (G is not None and len(range(*rows.indices(nc)))) else None
+        return inv, inv_Gt
+
+    s_inv, s_Gt = invert(smooth, smooth_needs_constant_G and nb > 0, slice(0, nb))
+    p_inv, p_Gt = invert(position if nc else None, position_needs_constant_G, slice(0, nc))
+    v_inv, v_Gt = invert(velocity if nc else None, velocity_needs_constant_G, slice(0, nc))
+    return Operators(M=M, K=K, C=C, K_norm=K_norm, C_norm=C_norm, G=G,
+                     smooth_inv=s_inv, smooth_inv_Gt=s_Gt, position_inv=p_inv, position_inv_Gt=p_Gt,
+                     velocity_inv=v_inv, velocity_inv_Gt=v_Gt)
+
+
+class Scaling(eqx.Module):
+    """Multiplier scalings and penalties (after eq. 50): ks = ps = m̄/h, kp = pp = kv = pv = m̄."""
+
+    ks: Scalar
+    kp: Scalar
+    kv: Scalar
+
+    @classmethod
+    def of(cls, model: Model, h: Scalar) -> "Scaling":
+        mbar = jnp.asarray(model.mbar, dtype=float)
+        return cls(ks=mbar / h, kp=mbar, kv=mbar)
+
+
+# ----------------------------------------------------------------- model helpers
+
+
+def mass_matrix(model: Model, ops: Operators, q: Vector) -> Matrix:
+    return ops.M if ops.M is not None else model.mass(q)
+
+
+def tangents(model: Model, ops: Operators, q: Vector, v: Vector, t: Scalar):
+    """K, C and their Frobenius norms (for the round-off floor)."""
+    if ops.K is not None:
+        return ops.K, ops.C, ops.K_norm, ops.C_norm
+    K, C = model.tangents(q, v, t)
+    if not model.velocity_dependent_force:
+        C = jnp.zeros_like(K)
+    return K, C, jnp.linalg.norm(K), jnp.linalg.norm(C)
+
+
+def force_change(model: Model, q, v, f_ref, t) -> Vector:
+    """f(q, v, t) - f_ref. Evaluating f (element assembly, O(n)) is cheaper than a
+    dense tangent product; the round-off it leaves is what the Newton floor covers."""
+    return model.force(q, v, t) - f_ref
+
+
+def constraint_jacobian(model: Model, ops: Operators, q: Vector) -> jax.Array:
+    """g_q(q) for all constraints, shape (nc, n)."""
+    return ops.G if ops.G is not None else model.constraint_jacobian(q)
+
+
+def bilateral_jacobian(model: Model, ops: Operators, q: Vector) -> jax.Array:
+    """g_q^B(q), shape (nb, n)."""
+    return ops.G[: model.n_bilateral] if ops.G is not None else jax.jacfwd(model.bilateral)(q)
+
+
+def curvature(model: Model, q: Vector, mu: jax.Array) -> Matrix:
+    """d(g_q(q)^T mu)/dq at fixed mu (mu over all nc constraints); zero if affine."""
+    if model.linear_constraints or model.n_constraints == 0:
+        return jnp.zeros((model.n_dof, model.n_dof), q.dtype)
+    return jax.jacfwd(lambda x: model.constraint_jacobian(x).T @ mu)(q)
+
+
+def convective(model: Model, q: Vector, v: Vector, bilateral_only: bool = False) -> jax.Array:
+    """G^s = d(g_q(q) v)/dq at fixed v, shape (nb or nc, n); zero if affine."""
+    rows = model.n_bilateral if bilateral_only else model.n_constraints
+    if model.linear_constraints:
+        return jnp.zeros((rows, model.n_dof), q.dtype)
+    fn = model.bilateral if bilateral_only else model.constraints
+    return jax.jacfwd(lambda x: jax.jacfwd(fn)(x) @ v)(q)
+
+
+def roundoff_floor(scale: Scalar, K_norm, C_norm, q, v) -> Scalar:
+    eps = jnp.finfo(q.dtype).eps
+    return ROUNDOFF_FACTOR * eps * scale * (K_norm * jnp.linalg.norm(q) + C_norm * jnp.linalg.norm(v))
+
+
+def pad_bilateral(model: Model, lam: jax.Array) -> jax.Array:
+    """Embed a bilateral multiplier (nb,) in the full constraint space (nc,)."""
+    return jnp.concatenate([lam, jnp.zeros((model.n_unilateral,), lam.dtype)])
+
+
+def is_unilateral(model: Model) -> jax.Array:
+    return jnp.arange(model.n_constraints) >= model.n_bilateral
+
+
+def restitution(model: Model, dtype) -> jax.Array:
+    """Restitution over all constraints (nc,), zero on the bilaterals."""
+    return jnp.concatenate([jnp.zeros((model.n_bilateral,), dtype), jnp.asarray(model.restitution, dtype)])
+
+
+def augmented_residual(inertia, force, G, c, mu, k, p, candidates, unilateral, tol_r, tol_f) -> Residual:
+    """Residual of a projection sub-problem (eqs. 37 and 42).
+
+    With the augmented multiplier ``aug = k mu - p c`` and the active set
+    ``candidates ∩ (bilateral ∪ {aug >= 0})``:
+    ``[inertia - force - G^T aug_active;  -k c (active);  -(k²/p) mu (inactive)]``.
+    Returns the :class:`Residual` with ``aux = (active, aug)``.
+    """
+    aug = k * mu - p * c
+    active = candidates & (~unilateral | (aug >= 0))
+    reaction = G.T @ jnp.where(active, aug, 0.0)
+    r2 = jnp.where(active, -k * c, -(k**2 / p) * mu)
+    r = jnp.concatenate([inertia - force - reaction, r2])
+    return Residual(r, convergence_bound([inertia, force, reaction, r2], tol_r, tol_f), (active, aug))
+
+
+def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector) -> Vector:
+    """v̇̃_0 from the equations of motion with the bilateral constraints at
+    acceleration level, unilateral constraints ignored (Algorithm 1, line 2)."""
+    M = model.mass(q0)
+    f = model.force(q0, v0, t0)
+    nb = model.n_bilateral
+    if nb == 0:
+        return jnp.linalg.solve(M, f)
+    GB = jax.jacfwd(model.bilateral)(q0)
+    conv = jax.jvp(lambda x: jax.jacfwd(model.bilateral)(x) @ v0, (q0,), (v0,))[1]
+    S = jnp.block([[M, -GB.T], [GB, jnp.zeros((nb, nb))]])
+    return jnp.linalg.solve(S, jnp.concatenate([f, -conv]))[: model.n_dof]
+
+
+# ------------------------------------------------------------------- results
+
+
+def result_code(results: list[NewtonResult]) -> jax.Array:
+    """Code of the first failing sub-problem (smooth, position, velocity order);
+    a non-finite residual beats the iteration cap."""
+    code = jnp.int8(Result.successful)
+    for i in reversed(range(len(results))):
+        r = results[i]
+        this = jnp.where(~jnp.isfinite(r.residual_norm), jnp.int8(4 + i), jnp.int8(1 + i))
+        code = jnp.where(~r.converged, this, code)
+    return code
+
+
+def make_output(model: Model, t, q, v, lam, iterations, residual, tolerance, result,
+                nu=None, impulse=None, g=None, gdot=None, active_position=None, active_velocity=None) -> StepOutput:
+    """Assemble a :class:`StepOutput`; constraint fields default to empty or zero."""
+    nb, nc = model.n_bilateral, model.n_constraints
+    zeros = jnp.zeros((nc,), q.dtype)
+    no = jnp.zeros((nc,), bool)
+    g = model.constraints(q) if g is None else g
+    gdot = constraint_jacobian_or_empty(model, q) @ v if gdot is None else gdot
+    return StepOutput(
+        t=t, q=q, v=v, lam=lam,
+        nu=zeros if nu is None else nu,
+        impulse=zeros if impulse is None else impulse,
+        gap=g[nb:], bilateral=g[:nb], bilateral_rate=gdot[:nb],
+        active_position=no if active_position is None else active_position,
+        active_velocity=no if active_velocity is None else active_velocity,
+        iterations=jnp.stack(iterations).astype(jnp.int32),
+        residual=jnp.stack(residual), tolerance=jnp.stack(tolerance), result=result,
+    )
+
+
+def constraint_jacobian_or_empty(model: Model, q: Vector) -> jax.Array:
+    if model.n_constraints == 0:
+        return jnp.zeros((0, model.n_dof), q.dtype)
+    return model.constraint_jacobian(q)
+
+
+# ------------------------------------------------------------------- schemes
+
+
+class AbstractScheme(eqx.Module):
+    """A time-stepping scheme: public ``prepare``, ``init`` and ``step``.
+
+    ``step(model, ops, state, h) -> (state, record)`` is a pure function; the
+    time loop (:func:`~nsga_jax.simulate`) scans it.
+
+    Attributes:
+        tol_r, tol_f: relative and reference tolerances of eq. 51.
+        max_iter: iteration cap of each Newton loop (static).
+    """
+
+    tol_r: ScalarLike = eqx.field(default=1e-5, converter=as_float)
+    tol_f: ScalarLike = eqx.field(default=1e-5, converter=as_float)
+    max_iter: int = eqx.field(static=True, default=50)
+
+    name = "abstract"
+
+    @property
+    def tolerances(self) -> tuple[Scalar, Scalar, int]:
+        return self.tol_r, self.tol_f, self.max_iter
+
+    @abc.abstractmethod
+    def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
+        """Constant operators for this model and step size (run once, outside the loop)."""
+
+    @abc.abstractmethod
+    def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
+        """The state at t0."""
+
+    @abc.abstractmethod
+    def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
+        """Advance one step of size h [s]."""
+
+    def bounds(self) -> dict[str, tuple[jax.Array, float, float]]:
+        """Scheme-specific settings and their closed ranges ``{name: (value, lo, hi)}``,
+        checked before anything is traced."""
+        return {}

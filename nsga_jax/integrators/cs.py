@@ -1,0 +1,152 @@
+"""The original coupled nonsmooth generalized-α scheme (CS) of Brüls, Acary and
+Cardona (2014), as the paper describes it (§3.3.6 and §4).
+
+The smooth equation is evaluated at the *total* motion, M(q) v̇̃ - g_q^T λ̃ =
+f(q, v, t) with q = q̃ + U and v = ṽ + W, with the bilateral velocity
+constraint on ṽ at q; the jump equations carry no f terms (eqs. 31a-b). All
+unknowns are iterated together with a Jacobian that keeps only the three
+diagonal blocks (the coupling of the smooth block to U and W is neglected):
+each global iteration is three linear solves, smooth, position, velocity, in
+Gauss–Seidel order, until all three residuals pass eq. 51. The step's
+iteration count is its number of linear solves, as in the paper. A divergent
+iteration (residual growing without bound, or non-finite) and the iteration cap
+are reported per step by a result code.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from .._custom_types import Scalar
+from ..models.base import Model
+from ..results import Result
+from .base import (
+    DIVERGENCE_FACTOR,
+    Operators,
+    StepOutput,
+    StepState,
+    constant_operators,
+    constraint_jacobian,
+    make_output,
+)
+from .ds import DS, AbstractGenAlpha
+from .subproblems import (
+    Smooth,
+    position_problem,
+    projection_start,
+    smooth_problem,
+    smooth_start,
+    velocity_problem,
+)
+
+
+def _add(x, dx):
+    return jax.tree_util.tree_map(jnp.add, x, dx)
+
+
+class CS(AbstractGenAlpha):
+    """Coupled nonsmooth generalized-α (the original NSGA).
+
+    Attributes:
+        rho_inf: spectral radius at infinity ρ∞ ∈ [0, 1] (eq. 35).
+        tol_r, tol_f: tolerances of eq. 51, applied to each of the three residuals.
+        max_iter: cap on the global iterations (each is three linear solves). Static.
+    """
+
+    name = "cs"
+
+    def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
+        co = self.coefficients
+        c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
+        return constant_operators(
+            model, t0,
+            smooth=lambda M, K, C: c_vd * M + C + c_q * K,
+            position=lambda M, K, C: M,
+            velocity=lambda M, K, C: M,
+            smooth_needs_constant_G=True,
+            position_needs_constant_G=True,
+        )
+
+    def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
+        if model.n_constraints == 0:  # no jumps: CS and DS coincide
+            return DS(self.tol_r, self.tol_f, self.max_iter, rho_inf=self.rho_inf).step(model, ops, state, h)
+        tol = self.tolerances
+        co = self.coefficients
+        t = state.t + h
+        a_pred, v_pred, q_pred = self.predict(state, h)
+        G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
+
+        def smooth_res(xs, xp, xv):
+            return smooth_problem(model, ops, co, tol, t, h, offset=(xp[0], xv[0]))
+
+        def as_smooth(xs):
+            vt, vd, qt, _ = xs
+            return Smooth(q=qt, v=vt, vd=vd, lam=jnp.zeros((model.n_bilateral,), qt.dtype))
+
+        def position_res(xs):
+            return position_problem(model, ops, tol, t, h, as_smooth(xs), None, with_forces=False)
+
+        def velocity_res(xs, xp, candidates):
+            return velocity_problem(model, ops, tol, t, h, as_smooth(xs), xp[0], candidates, None, G_prev_v_prev,
+                                    with_forces=False)
+
+        def residuals(xs, xp, xv):
+            rp = position_res(xs)[0](xp)
+            return smooth_res(xs, xp, xv)[0](xs), rp, velocity_res(xs, xp, rp.aux[0])[0](xv)
+
+        def norms(rs):
+            return jnp.stack([jnp.linalg.norm(r.r) for r in rs])
+
+        def bounds(rs):
+            return jnp.stack([r.bound for r in rs])
+
+        x0 = (smooth_start(q_pred, v_pred, model.n_bilateral), projection_start(model, q_pred),
+              projection_start(model, q_pred))
+        r0 = residuals(*x0)
+        n0 = norms(r0)
+
+        def sweep(carry):
+            """One global iteration: Gauss-Seidel over the block-diagonal Jacobian."""
+            (xs, xp, xv), (rs, _, _), _, it = carry
+            dxs, fs = smooth_res(xs, xp, xv)[1](xs, rs)
+            xs = _add(xs, dxs)
+            res_p, upd_p = position_res(xs)
+            dxp, fp = upd_p(xp, res_p(xp))
+            xp = _add(xp, dxp)
+            rp = res_p(xp)
+            res_v, upd_v = velocity_res(xs, xp, rp.aux[0])
+            dxv, fv = upd_v(xv, res_v(xv))
+            xv = _add(xv, dxv)
+            rs_new = (smooth_res(xs, xp, xv)[0](xs), rp, res_v(xv))
+            return (xs, xp, xv), rs_new, jnp.stack([fs, fp, fv]), it + 1
+
+        def status(rs, floors):
+            n = norms(rs)
+            converged = jnp.all(n < bounds(rs) + floors)
+            diverged = ~jnp.all(jnp.isfinite(n)) | jnp.any(n > DIVERGENCE_FACTOR * (n0 + bounds(rs)))
+            return converged, diverged
+
+        def cond(carry):
+            _, rs, floors, it = carry
+            converged, diverged = status(rs, floors)
+            return ~converged & ~diverged & (it < self.max_iter)
+
+        carry = lax.while_loop(cond, sweep, (x0, r0, jnp.zeros(3, q_pred.dtype), jnp.zeros((), jnp.int32)))
+        (xs, xp, xv), (rs, rp, rv), floors, it = carry
+        converged, diverged = status((rs, rp, rv), floors)
+        result = jnp.where(converged, jnp.int8(Result.successful),
+                           jnp.where(diverged, jnp.int8(Result.coupled_diverged), jnp.int8(Result.coupled_max_iter)))
+
+        vt, vd, qt, _ = xs
+        U, W = xp[0], xv[0]
+        active_p, xi, g, _ = rp.aux
+        active_v, sigma, gdot = rv.aux
+        q, v = qt + U, vt + W
+        out = make_output(
+            model, t, q, v, rs.aux, [it, it, it], list(norms((rs, rp, rv))), list(bounds((rs, rp, rv)) + floors),
+            result, nu=jnp.where(active_p, xi, 0.0), impulse=jnp.where(active_v, sigma, 0.0), g=g, gdot=gdot,
+            active_position=active_p, active_velocity=active_v,
+        )
+        return self.finalise(t, q, v, vd, a_pred), out

@@ -1,0 +1,229 @@
+"""The three sub-problems of the nonsmooth generalized-α schemes (paper §3.3).
+
+Each builder returns the pair ``(residual, update)`` that
+:func:`~nsga_jax.integrators.newton.newton` iterates:
+
+- :func:`smooth_problem` (eqs. 33-34, matrix 47): unknowns x = (ṽ, v̇̃, q̃, λ̃),
+  incremented together by Δṽ through (44b-c), and the scaled bilateral
+  multipliers; unilateral constraints ignored;
+- :func:`position_problem` (eqs. 37-38, matrix 48): x = (U, ν), q = q̃ + U,
+  active set A from ξ = kp ν - pp g(q), with or without the h² f^p term (29);
+- :func:`velocity_problem` (eqs. 40-43, matrix 49): x = (W, Λ), v = ṽ + W,
+  active set B ⊆ A from σ = kv Λ - pv ġ, with or without the h f* term (8).
+
+DS runs them once each in sequence; DSn drops the f^p and f* terms (eqs.
+31a-b); CS evaluates the smooth problem at the total motion (q̃ + U, ṽ + W)
+and iterates all three together.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Scalar, Vector
+from ..models.base import Model
+from .base import (
+    Operators,
+    Scaling,
+    augmented_residual,
+    bilateral_jacobian,
+    constraint_jacobian,
+    convective,
+    curvature,
+    force_change,
+    is_unilateral,
+    mass_matrix,
+    pad_bilateral,
+    restitution,
+    roundoff_floor,
+    tangents,
+)
+from .coefficients import GenAlphaCoefficients
+from .linalg import dense_solve, inverse_solve, solve_bordered
+from .newton import Residual, convergence_bound
+
+
+class Smooth(NamedTuple):
+    """The smooth motion: q̃, ṽ, v̇̃ (n,) and the physical multipliers λ̃ (nb,)."""
+
+    q: Vector
+    v: Vector
+    vd: Vector
+    lam: jax.Array
+
+
+def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, t: Scalar, h: Scalar,
+                   offset: tuple[Vector, Vector] | None = None):
+    """Step 1: residual [M(q) v̇̃ - f(q, v, t) - g_q^T (ks λ̃ - ps g_q ṽ);  -ks g_q ṽ].
+
+    DS evaluates it at the smooth motion, q = q̃, v = ṽ; CS (``offset=(U, W)``)
+    at the total motion q = q̃ + U, v = ṽ + W, keeping the bilateral velocity
+    constraint on ṽ. The residual's ``aux`` is the physical λ̃ = ks λ - ps g_q ṽ.
+    """
+    tol_r, tol_f, _ = tol
+    n, nb = model.n_dof, model.n_bilateral
+    ks = ps = Scaling.of(model, h).ks
+    c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
+
+    def total(qt, vt):
+        return (qt, vt) if offset is None else (qt + offset[0], vt + offset[1])
+
+    def residual(x):
+        vt, vd, qt, lam = x
+        q, v = total(qt, vt)
+        f = model.force(q, v, t)
+        inertia = model.mass_product(q, vd)
+        if nb == 0:
+            return Residual(inertia - f, convergence_bound([inertia, f], tol_r, tol_f), jnp.zeros((0,), q.dtype))
+        GB = bilateral_jacobian(model, ops, q)
+        mu = ks * lam - ps * (GB @ vt)
+        reaction = GB.T @ mu
+        r2 = -ks * (GB @ vt)
+        r = jnp.concatenate([inertia - f - reaction, r2])
+        return Residual(r, convergence_bound([inertia, f, reaction, r2], tol_r, tol_f), mu)
+
+    def update(x, res):
+        vt, vd, qt, lam = x
+        q, v = total(qt, vt)
+        K, C, K_norm, C_norm = tangents(model, ops, q, v, t)
+        floor = roundoff_floor(1.0, K_norm, C_norm, q, v)
+        if ops.smooth_inv is not None:
+            solve = inverse_solve(ops.smooth_inv)
+        else:
+            Ks = K + model.inertia_stiffness(q, vd) - curvature(model, q, pad_bilateral(model, res.aux))
+            solve = dense_solve(c_vd * mass_matrix(model, ops, q) + C + c_q * Ks)
+        if nb == 0:
+            dv, dlam = -solve(res.r), jnp.zeros((0,), vt.dtype)
+        else:
+            GB = bilateral_jacobian(model, ops, q)
+            G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
+            dv, dlam = solve_bordered(solve, res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool),
+                                      ks, ps, ops.smooth_inv_Gt)
+        return (dv, c_vd * dv, c_q * dv, dlam), floor
+
+    return residual, update
+
+
+def smooth_start(q_pred: Vector, v_pred: Vector, nb: int):
+    """Newton's starting point of step 1: the predictor, v̇̃ = 0, λ̃ = 0."""
+    return (v_pred, jnp.zeros_like(v_pred), q_pred, jnp.zeros((nb,), q_pred.dtype))
+
+
+def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth,
+                     f_smooth: Vector | None, with_forces: bool):
+    """Step 2: residual [M(q̃) U - h² f^p - g_q^{A T} ξ^A;  -kp g^A;  -(kp²/pp) ν^{Ā}]
+    with ξ = kp ν - pp g(q), A = bilaterals ∪ {ξ_j >= 0}; ``aux = (A, ξ, g, g_q)``.
+    ``with_forces=False`` drops h² f^p (eq. 31b)."""
+    tol_r, tol_f, _ = tol
+    n, nb = model.n_dof, model.n_bilateral
+    kp = pp = Scaling.of(model, h).kp
+    unilateral = is_unilateral(model)
+    GB_smooth = bilateral_jacobian(model, ops, smooth.q) if (with_forces and nb and ops.G is None) else None
+
+    def f_p(q, G):
+        fp = force_change(model, q, smooth.v, f_smooth, t)
+        if GB_smooth is not None:
+            fp = fp + (G[:nb] - GB_smooth).T @ smooth.lam  # (g_q^T - g̃_q^T) λ̃, eq. 29
+        return fp
+
+    def residual(x):
+        U, nu = x
+        q = smooth.q + U
+        g = model.constraints(q)
+        G = constraint_jacobian(model, ops, q)
+        inertia = model.mass_product(smooth.q, U)
+        force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
+        res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
+        return res._replace(aux=res.aux + (g, G))
+
+    def update(x, res):
+        U, nu = x
+        active, xi, _, G = res.aux
+        q = smooth.q + U
+        if with_forces:
+            K, _, K_norm, C_norm = tangents(model, ops, q, smooth.v, t)
+            floor = roundoff_floor(h**2, K_norm, C_norm, q, smooth.v)
+        else:
+            K, floor = None, jnp.zeros(())
+        if ops.position_inv is not None:
+            solve = inverse_solve(ops.position_inv)
+        else:
+            # -d(g_q^{A T} ξ^A)/dq - h² df^p/dq; the penalty term is left to solve_bordered
+            mu = jnp.where(active, xi, 0.0)
+            A = mass_matrix(model, ops, smooth.q)
+            if with_forces:
+                mu = mu + h**2 * pad_bilateral(model, smooth.lam)
+                A = A + h**2 * K
+            solve = dense_solve(A - curvature(model, q, mu))
+        dU, dnu = solve_bordered(solve, res.r[:n], res.r[n:], G, G, active, kp, pp, ops.position_inv_Gt)
+        return (dU, dnu), floor
+
+    return residual, update
+
+
+def projection_start(model: Model, q: Vector):
+    """Newton's starting point of steps 2 and 3: U = 0, ν = 0 (or W = 0, Λ = 0)."""
+    return (jnp.zeros_like(q), jnp.zeros((model.n_constraints,), q.dtype))
+
+
+def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,
+                     candidates: jax.Array, f_smooth: Vector | None, G_prev_v_prev: jax.Array,
+                     with_forces: bool):
+    """Step 3: residual [M(q) W - h f* - g_q^{B T} σ^B;  -kv ġ^B;  -(kv²/pv) Λ^{B̄}] with
+    ġ = g_q v + e g_{q,n} v_n, σ = kv Λ - pv ġ, B = bilaterals ∪ {j ∈ A : σ_j >= 0};
+    ``aux = (B, σ, ġ)``. ``candidates`` is A; ``G_prev_v_prev`` is g_{q,n} v_n.
+    ``with_forces=False`` drops h f* (eq. 31a)."""
+    tol_r, tol_f, _ = tol
+    n, nb = model.n_dof, model.n_bilateral
+    kv = pv = Scaling.of(model, h).kv
+    unilateral = is_unilateral(model)
+    q = smooth.q + U
+    G = constraint_jacobian(model, ops, q)
+    restituted = restitution(model, q.dtype) * G_prev_v_prev
+    f_const = None
+    if with_forces:
+        # terms of f* (eq. 8) that W does not change: (g_q^T - g̃_q^T) λ̃ - (M(q) - M(q̃)) v̇̃
+        f_const = jnp.zeros_like(q)
+        if nb and ops.G is None:
+            f_const = f_const + (G[:nb] - bilateral_jacobian(model, ops, smooth.q)).T @ smooth.lam
+        if not model.constant_mass:
+            f_const = f_const - (model.mass_product(q, smooth.vd) - model.mass_product(smooth.q, smooth.vd))
+        if not model.velocity_dependent_force:  # f(q, v) - f(q̃, ṽ) does not change with W
+            f_const = f_const + force_change(model, q, smooth.v, f_smooth, t)
+
+    def residual(x):
+        W, Lam = x
+        v = smooth.v + W
+        gdot = G @ v + restituted
+        if with_forces:
+            f_star = f_const
+            if model.velocity_dependent_force:
+                f_star = f_star + force_change(model, q, v, f_smooth, t)
+            force = h * f_star
+        else:
+            force = jnp.zeros_like(W)
+        res = augmented_residual(model.mass_product(q, W), force, G, gdot, Lam, kv, pv, candidates,
+                                 unilateral, tol_r, tol_f)
+        return res._replace(aux=res.aux + (gdot,))
+
+    def update(x, res):
+        W, Lam = x
+        active = res.aux[0]
+        v = smooth.v + W
+        C, floor = None, jnp.zeros(())
+        if with_forces:
+            _, C, K_norm, C_norm = tangents(model, ops, q, v, t)
+            floor = roundoff_floor(h, K_norm, C_norm, q, v)
+        if ops.velocity_inv is not None:
+            solve = inverse_solve(ops.velocity_inv)
+        else:
+            A = mass_matrix(model, ops, q)
+            solve = dense_solve(A + h * C if with_forces else A)
+        dW, dLam = solve_bordered(solve, res.r[:n], res.r[n:], G, G, active, kv, pv, ops.velocity_inv_Gt)
+        return (dW, dLam), floor
+
+    return residual, update
+
