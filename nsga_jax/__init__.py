@@ -2,9 +2,21 @@
 
 Importing the package turns on float64 (``jax_enable_x64``): the schemes'
 Newton tolerances and constraint checks are meant for double precision.
+
+It also turns off XLA's concurrency-optimised CPU scheduler (unless the user
+set ``XLA_FLAGS`` otherwise): with jaxlib 0.10 a program that vmaps dense
+solves over step sizes deadlocked on its second execution without this flag
+(seen with ``nsga_jax.batch``). The flag only takes effect if nsga_jax is
+imported before JAX runs its first computation.
 """
 
-import jax
+import os
+
+_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler"
+if _FLAG not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + f" {_FLAG}=false").strip()
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 

@@ -205,11 +205,13 @@ def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
 _run_chunk_jit = eqx.filter_jit(_run_chunk)
 
 
-@eqx.filter_jit
-def _prepare_and_init(model, scheme, t0, q0, v0, h):
+def _prepare_and_init_raw(model, scheme, t0, q0, v0, h):
     ops = scheme.prepare(model, h, t0)
     state = scheme.init(model, t0, q0, v0)
     return ops, state
+
+
+_prepare_and_init = eqx.filter_jit(_prepare_and_init_raw)
 
 
 def simulate(

@@ -29,6 +29,22 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--chunk", type=int, default=None, help="steps per compiled chunk")
     run.add_argument("--quiet", action="store_true", help="no progress output")
 
+    conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size")
+    conv.add_argument("scene", help="scene name or .toml config")
+    conv.add_argument("--scheme", default="ds", help="comma-separated schemes (ds, dsn, cs, mj)")
+    conv.add_argument("--h", required=True, help="comma-separated step sizes [s]")
+    ref = conv.add_mutually_exclusive_group(required=True)
+    ref.add_argument("--ref-h", type=float, help="reference: a run at this (much smaller) step")
+    ref.add_argument("--ref", choices=("exact",), help="reference: the scene's exact solution")
+    conv.add_argument("--ref-scheme", default="ds", help="scheme of the reference run (default ds)")
+    conv.add_argument("--t-end", type=float, help="end of the time window [s]")
+    conv.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
+    conv.add_argument("--observables", help="comma-separated observables (default: the scene's)")
+    conv.add_argument("--mode", choices=("grouped", "padded", "separate"), default="grouped",
+                      help="how the step sizes run: vmap over groups of similar step counts (default), one "
+                           "padded vmap, or separate runs (see experiments/bench_batch_h.py)")
+    conv.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_convergence)")
+
     sub.add_parser("scenes", help="list the built-in scenes and their parameters")
     cfg = sub.add_parser("config", help="print a scene's default TOML config")
     cfg.add_argument("scene")
@@ -73,6 +89,47 @@ def _run(args) -> int:
     return 0
 
 
+def _convergence(args) -> int:
+    from .studies import make_reference, study, write_study
+
+    overrides = dict(parse_override(s) for s in args.set)
+    if args.t_end is not None:
+        overrides["t_end"] = args.t_end
+    schemes = [s.strip() for s in args.scheme.split(",") if s.strip()]
+    for s in schemes + [args.ref_scheme]:
+        if s not in ("ds", "dsn", "cs", "mj"):
+            raise ConfigError(f"scheme must be one of ds, dsn, cs, mj, got {s!r}")
+    try:
+        hs = [float(h) for h in args.h.split(",")]
+    except ValueError:
+        raise ConfigError(f"--h expects comma-separated numbers, got {args.h!r}") from None
+    scene = load_scene(args.scene, overrides)  # validates everything before anything runs
+    for h in hs:
+        load_scene(args.scene, {**overrides, "h": h})
+    observables = args.observables.split(",") if args.observables else list(scene.spec.error_observables)
+    unknown = [k for k in observables if k not in scene.spec.observables]
+    if unknown:
+        raise ConfigError(f"unknown observable {unknown[0]!r}; {scene.name} has {', '.join(scene.spec.observables)}")
+    out = args.out or Path("nsga_out") / f"{scene.name}_convergence"
+    if args.ref:
+        reference = make_reference(args.scene, overrides, "exact")
+    else:
+        if args.ref_h >= min(hs):
+            raise ConfigError(f"--ref-h must be smaller than every step size, got {args.ref_h} >= {min(hs)}")
+        print(f"reference: {args.ref_scheme.upper()} at h = {args.ref_h:g} s ...", file=sys.stderr)
+        reference = make_reference(args.scene, {**overrides, "scheme": args.ref_scheme}, args.ref_h)
+    rows = study(args.scene, schemes, hs, reference, overrides, observables, mode=args.mode)
+    paths = write_study(rows, out, scene.name, reference)
+    for r in rows:
+        errs = ", ".join(f"{k} {e:.3e}" for k, e in r.errors.items())
+        it = r.iterations["linear_solves"]
+        fail = f", {r.failed_steps} failed steps ({r.result})" if r.failed_steps else ""
+        print(f"{r.scheme:>3} h = {r.h:<8g} {errs}; solves/step {it['mean']:.2f} (max {it['max']}); "
+              f"{r.wall_time_s:.3f} s{fail}")
+    print("wrote " + ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
 def _scenes() -> int:
     for name, spec in sorted(REGISTRY.items()):
         print(f"{name}: {spec.description}")
@@ -88,6 +145,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "run":
             return _run(args)
+        if args.command == "convergence":
+            return _convergence(args)
         if args.command == "scenes":
             return _scenes()
         if args.command == "config":

@@ -33,6 +33,8 @@ class Scene:
         parameters: the validated scene parameters.
         solver: the validated solver settings (scheme, h, t_end, rho_inf, ...).
         observe: ``Solution -> {name: array (N+1,)}``, the scene's observables.
+        exact: ``ts -> {name: array}``, the exact solution of some observables
+            where the scene has one (else ``None``).
     """
 
     name: str
@@ -42,6 +44,11 @@ class Scene:
     parameters: dict[str, Any]
     solver: dict[str, Any]
     observe: Callable[[Solution], dict[str, np.ndarray]]
+    exact: Callable[[np.ndarray], dict[str, np.ndarray]] | None = None
+
+    @property
+    def spec(self) -> "SceneSpec":
+        return REGISTRY[self.name]
 
     def scheme(self) -> AbstractScheme:
         """The configured scheme (``solver["scheme"]``) with its settings."""
@@ -76,6 +83,8 @@ class SceneSpec:
     solver_defaults: dict[str, Any]
     build: Callable[[dict[str, Any], dict[str, Any]], Scene]
     observables: tuple[str, ...] = field(default=())
+    error_observables: tuple[str, ...] = field(default=())
+    """The observables the paper's convergence studies measure (eq. 52)."""
 
     def solver_specs(self) -> dict[str, Param]:
         specs = dict(SOLVER_PARAMS)

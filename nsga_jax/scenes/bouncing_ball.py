@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..exact import bouncing_ball
 from ..models.point_mass import BouncingBall
 from .base import Scene, SceneSpec, register
 from .params import Param, positive, unit_interval
@@ -26,8 +27,12 @@ def build(p, solver) -> Scene:
         energy = 0.5 * p["mass"] * vz**2 + p["mass"] * p["gravity"] * z
         return {"z": z, "vz": vz, "force": sol.impulse[:, 0] / sol.h, "energy": energy}
 
+    def exact(ts):
+        z, vz = bouncing_ball(ts, p["height"], p["velocity"], p["gravity"], p["e"])
+        return {"z": z, "vz": vz}
+
     return Scene("bouncing_ball", model, np.array([p["height"]]), np.array([p["velocity"]]),
-                 p, solver, observe)
+                 p, solver, observe, exact)
 
 
 SPEC = register(
@@ -38,5 +43,6 @@ SPEC = register(
         solver_defaults={"h": 1e-3, "t_end": 3.0},
         build=build,
         observables=("z", "vz", "force", "energy"),
+        error_observables=("z", "vz"),
     )
 )

@@ -64,5 +64,6 @@ SPEC = register(
         solver_defaults={"h": 3e-5, "t_end": 0.3},
         build=build,
         observables=("x1_uz", "x1_vz", "min_gap", "contact_force", "energy", "gaps"),
+        error_observables=("x1_uz", "x1_vz"),
     )
 )

@@ -74,5 +74,6 @@ SPEC = register(
         build=build,
         observables=("tip_x", "tip_y", "tip_theta", "tip_vx", "tip_vy", "tip_omega", "tip_uy", "gap", "force",
                      "energy"),
+        error_observables=("tip_uy", "tip_vy"),
     )
 )

@@ -63,5 +63,6 @@ SPEC = register(
         solver_defaults={"h": 1e-3, "t_end": 1.5},
         build=build,
         observables=("tip_u", "tip_v", "node045_u", "node045_v", "tip_gap", "tip_force", "energy"),
+        error_observables=("node045_u", "node045_v", "tip_u", "tip_v"),
     )
 )

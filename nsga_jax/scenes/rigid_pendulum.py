@@ -59,5 +59,6 @@ SPEC = register(
         solver_defaults={"h": 1e-3, "t_end": 5.0},
         build=build,
         observables=("x", "y", "vx", "vy", "gap", "constraint", "force", "energy"),
+        error_observables=("x", "vx"),
     )
 )

@@ -1,0 +1,270 @@
+"""Step-size studies: convergence (eq. 52 error against h), Newton iterations
+against h, and error against run time, for any scheme on any scene.
+
+A study runs a scene at several step sizes with one or more schemes, against
+a reference of the same semi-discrete model: the exact solution where the
+scene has one, else a run at a much smaller step. It returns one row per
+(scheme, h) with the errors, timings, iteration statistics and failures, and
+writes them as CSV and PNG (:func:`write_study`).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ._simulate import Solution, _n_steps, simulate  # noqa: E402
+from .batch import simulate_batch  # noqa: E402
+from .metrics import observed_order, relative_l1_error  # noqa: E402
+from .results import ConfigError  # noqa: E402
+from .scenes.base import Scene, load_scene  # noqa: E402
+
+MODES = ("grouped", "padded", "separate")
+
+
+def run_step_sizes(scene: Scene, hs, mode: str = "grouped", group_ratio: float = 1.5) -> list[Solution]:
+    """Run ``scene`` (its scheme and settings) at every step size in ``hs``.
+
+    Modes: ``"separate"`` -- one compiled run per h (each with its own timing);
+    ``"padded"`` -- all h in one ``vmap``, padded to the longest run;
+    ``"grouped"`` -- ``vmap`` over groups of step sizes whose step counts are
+    within ``group_ratio`` of each other (so padding wastes at most that
+    factor), groups run one after the other. Failures never stop a run (they
+    are recorded). Returns solutions in the order of ``hs``.
+    """
+    if mode not in MODES:
+        raise ConfigError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    hs = [float(h) for h in hs]
+    T = scene.solver["t_end"]
+    if mode == "separate":
+        groups = [[i] for i in range(len(hs))]
+    elif mode == "padded":
+        groups = [list(range(len(hs)))]
+    else:
+        order = sorted(range(len(hs)), key=lambda i: _n_steps(0.0, T, hs[i]))
+        groups = []
+        for i in order:
+            if groups and _n_steps(0.0, T, hs[i]) <= group_ratio * _n_steps(0.0, T, hs[groups[-1][0]]):
+                groups[-1].append(i)
+            else:
+                groups.append([i])
+    out: list[Solution | None] = [None] * len(hs)
+    scheme = scene.scheme()
+    for group in groups:
+        if len(group) == 1:
+            i = group[0]
+            out[i] = simulate(scene.model, scheme, 0.0, T, hs[i], scene.q0, scene.v0, throw=False,
+                              observe=scene.observe)
+        else:
+            sols = simulate_batch(scene.model, scheme, 0.0, T, [hs[i] for i in group], scene.q0, scene.v0,
+                                  observe=scene.observe)
+            for i, sol in zip(group, sols):
+                out[i] = sol
+    return out  # type: ignore[return-value]
+
+
+@dataclass
+class Reference:
+    """A reference solution: ``values(ts)`` gives each observable at the times ``ts``."""
+
+    description: str
+    exact: object = None
+    solution: Solution | None = None
+    wall_time: float = 0.0
+
+    def values(self, ts: np.ndarray, names) -> dict[str, np.ndarray]:
+        if self.solution is None:
+            ex = self.exact(ts)
+            return {k: ex[k] for k in names}
+        ref = self.solution
+        out = {}
+        for k in names:
+            y = ref.observables[k]
+            ratio = np.rint(ts / ref.h).astype(int)
+            if np.allclose(ratio * ref.h, ts, rtol=0, atol=1e-9 * max(1.0, ts[-1])) and ratio[-1] < len(y):
+                out[k] = y[ratio]  # on the reference grid
+            else:
+                out[k] = np.interp(ts, ref.ts, y)
+        return out
+
+
+def make_reference(scene_name: str, overrides: dict, ref: str | float) -> Reference:
+    """``ref="exact"`` (the scene's exact solution) or a step size: a run of the
+    scene with ``overrides`` (which fix its scheme) at that step."""
+    if ref == "exact":
+        scene = load_scene(scene_name, overrides)
+        if scene.exact is None:
+            raise ConfigError(f"scene {scene_name!r} has no exact solution; give a reference step (--ref-h)")
+        return Reference("exact solution", exact=scene.exact)
+    h_ref = float(ref)
+    scene = load_scene(scene_name, {**overrides, "h": h_ref})
+    t = time.perf_counter()
+    sol = scene.run(throw=False, progress=False)
+    wall = time.perf_counter() - t
+    if sol.stats["failed_steps"]:
+        raise ConfigError(f"the reference run ({scene.solver['scheme']}, h = {h_ref:g}) has failed steps; "
+                          "choose a smaller reference step or another scheme")
+    return Reference(f"{scene.solver['scheme'].upper()} at h = {h_ref:g} s", solution=sol, wall_time=wall)
+
+
+@dataclass
+class StudyRow:
+    scheme: str
+    h: float
+    n_steps: int
+    wall_time_s: float
+    compile_time_s: float
+    failed_steps: int
+    first_failure_t: float
+    result: str
+    iterations: dict
+    errors: dict = field(default_factory=dict)
+    batch_size: int = 1
+
+    def flat(self) -> dict:
+        row = {"scheme": self.scheme, "h": self.h, "n_steps": self.n_steps, "batch_size": self.batch_size,
+               "wall_time_s": self.wall_time_s,
+               "compile_time_s": self.compile_time_s, "failed_steps": self.failed_steps,
+               "first_failure_t": self.first_failure_t, "result": self.result}
+        for sub, st in self.iterations.items():
+            row[f"{sub}_mean"] = st["mean"]
+            row[f"{sub}_max"] = st["max"]
+        for k, e in self.errors.items():
+            row[f"error_{k}"] = e
+        return row
+
+
+def study(scene_name: str, schemes, hs, reference: Reference, overrides: dict | None = None,
+          observables=None, mode: str = "grouped") -> list[StudyRow]:
+    """Run ``scene_name`` with each scheme at each h; errors (eq. 52) against ``reference``.
+
+    With a batched ``mode``, runs that shared a ``vmap`` report the batch's wall
+    time (``batch_size`` says how many shared it); ``mode="separate"`` gives
+    each run its own timing, as error-against-run-time plots need.
+
+    A run that fails is kept: its errors are computed over the steps before
+    its first failure only if it has none (else they are NaN), and the row
+    records the failure.
+    """
+    overrides = dict(overrides or {})
+    rows = []
+    for scheme in schemes:
+        scene = load_scene(scene_name, {**overrides, "scheme": scheme})
+        names = list(observables or scene.spec.error_observables)
+        sols = run_step_sizes(scene, hs, mode=mode)
+        for sol in sols:
+            st = sol.stats
+            failed = sol.failed_steps
+            errors = {}
+            if failed.size == 0:
+                ref = reference.values(sol.ts, names)
+                errors = {k: relative_l1_error(sol.observables[k], ref[k]) for k in names}
+            else:
+                errors = {k: math.nan for k in names}
+            rows.append(StudyRow(
+                scheme=scheme, h=sol.h, n_steps=sol.n_steps, wall_time_s=sol.wall_time,
+                compile_time_s=sol.compile_time, failed_steps=int(failed.size),
+                first_failure_t=float(sol.ts[failed[0]]) if failed.size else math.nan,
+                result=st["result"], iterations=st["iterations"], errors=errors,
+                batch_size=sum(s.wall_time == sol.wall_time and s.compile_time == sol.compile_time for s in sols),
+            ))
+    return rows
+
+
+def slopes(rows: list[StudyRow]) -> dict[tuple[str, str], float]:
+    """Observed order of each (scheme, observable) over its converged runs."""
+    out = {}
+    for scheme in dict.fromkeys(r.scheme for r in rows):
+        mine = [r for r in rows if r.scheme == scheme and r.failed_steps == 0]
+        for k in mine[0].errors if mine else []:
+            pts = [(r.h, r.errors[k]) for r in mine if np.isfinite(r.errors[k]) and r.errors[k] > 0]
+            if len(pts) >= 2:
+                out[(scheme, k)] = observed_order(*zip(*pts))
+    return out
+
+
+def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Reference) -> dict[str, Path]:
+    """study.csv, convergence.png (error vs h with slopes), iterations.png (mean and
+    max linear solves per step vs h, failures marked) and work_precision.png
+    (error vs wall time)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = {"csv": out_dir / "study.csv"}
+    flat = [r.flat() for r in rows]
+    keys = list(dict.fromkeys(k for f in flat for k in f))
+    with open(paths["csv"], "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        for f in flat:
+            w.writerow(f)
+    schemes = list(dict.fromkeys(r.scheme for r in rows))
+    names = list(rows[0].errors)
+    order = slopes(rows)
+    markers = dict(zip(schemes, "osD^v<>"))
+
+    fig, axes = plt.subplots(1, len(names), figsize=(4.6 * len(names), 3.8), squeeze=False)
+    for ax, k in zip(axes[0], names):
+        for s in schemes:
+            pts = [(r.h, r.errors[k]) for r in rows if r.scheme == s and np.isfinite(r.errors[k])]
+            if pts:
+                label = f"{s.upper()} (order {order[(s, k)]:.2f})" if (s, k) in order else s.upper()
+                ax.loglog(*zip(*pts), marker=markers[s], label=label)
+            fails = [r.h for r in rows if r.scheme == s and r.failed_steps]
+            if fails:
+                ax.plot(fails, [ax.get_ylim()[0] if pts else 1.0] * len(fails), "x", color="r", ms=9,
+                        label=f"{s.upper()} failed")
+        ax.set_xlabel("h [s]")
+        ax.set_ylabel(f"error of {k} (eq. 52)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{title}: convergence against {reference.description}")
+    fig.tight_layout()
+    paths["convergence"] = out_dir / "convergence.png"
+    fig.savefig(paths["convergence"], dpi=100)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for s in schemes:
+        mine = [r for r in rows if r.scheme == s]
+        h = [r.h for r in mine]
+        for ax, stat in zip(axes, ("mean", "max")):
+            ax.semilogx(h, [r.iterations["linear_solves"][stat] for r in mine], marker=markers[s], label=s.upper())
+            bad = [(r.h, r.iterations["linear_solves"][stat]) for r in mine if r.failed_steps]
+            if bad:
+                ax.plot(*zip(*bad), "x", color="r", ms=10, mew=2, label=f"{s.upper()} failed")
+    for ax, stat in zip(axes, ("mean", "max")):
+        ax.set_xlabel("h [s]")
+        ax.set_ylabel(f"{stat} linear solves per step")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{title}: Newton iterations (linear solves) per step")
+    fig.tight_layout()
+    paths["iterations"] = out_dir / "iterations.png"
+    fig.savefig(paths["iterations"], dpi=100)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, len(names), figsize=(4.6 * len(names), 3.8), squeeze=False)
+    for ax, k in zip(axes[0], names):
+        for s in schemes:
+            pts = [(r.wall_time_s, r.errors[k]) for r in rows if r.scheme == s and np.isfinite(r.errors[k])]
+            if pts:
+                ax.loglog(*zip(*sorted(pts)), marker=markers[s], label=s.upper())
+        ax.set_xlabel("wall time [s] (compile excluded)")
+        ax.set_ylabel(f"error of {k} (eq. 52)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{title}: error against run time")
+    fig.tight_layout()
+    paths["work_precision"] = out_dir / "work_precision.png"
+    fig.savefig(paths["work_precision"], dpi=100)
+    plt.close(fig)
+    return paths
