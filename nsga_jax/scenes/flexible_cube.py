@@ -40,6 +40,8 @@ def build(p, solver) -> Scene:
     v0 = np.zeros_like(q0)
     v0[2::3] = p["velocity"]
     corner = int(bottom[0])  # node x1: the bottom corner at (-a/2, -a/2)
+    top = int(np.nonzero(np.isclose(nodes[:, :2], nodes[corner, :2]).all(axis=1)
+                         & np.isclose(nodes[:, 2], nodes[:, 2].max()))[0][0])  # node x8: above x1
     energy = jax.jit(jax.vmap(model.energy))
 
     def observe(sol):
@@ -47,6 +49,8 @@ def build(p, solver) -> Scene:
         return {
             "x1_uz": z - q0[3 * corner + 2],
             "x1_vz": sol.v[:, 3 * corner + 2],
+            "x8_uz": sol.q[:, 3 * top + 2] - q0[3 * top + 2],
+            "x8_vz": sol.v[:, 3 * top + 2],
             "min_gap": sol.gap.min(axis=1),
             "contact_force": sol.impulse.sum(axis=1) / sol.h,
             "energy": np.asarray(energy(sol.q, sol.v)),
@@ -63,7 +67,7 @@ SPEC = register(
         parameters=PARAMETERS,
         solver_defaults={"h": 3e-5, "t_end": 0.3},
         build=build,
-        observables=("x1_uz", "x1_vz", "min_gap", "contact_force", "energy", "gaps"),
+        observables=("x1_uz", "x1_vz", "x8_uz", "x8_vz", "min_gap", "contact_force", "energy", "gaps"),
         error_observables=("x1_uz", "x1_vz"),
     )
 )
