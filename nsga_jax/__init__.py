@@ -30,6 +30,7 @@ from .integrators.mj import MJ  # noqa: E402
 from .models import BouncingBall, ElasticBar, Model, RigidPendulum  # noqa: E402
 from .results import ConfigError, ConvergenceError, Result  # noqa: E402
 from .scenes import load_scene  # noqa: E402
+from .trajectory import Trajectory, trajectory  # noqa: E402
 
 SCHEMES = {"ds": DS, "dsn": DSn, "cs": CS, "mj": MJ}
 """Scheme classes by their command-line names."""
@@ -57,4 +58,6 @@ __all__ = [
     "simulate",
     "scenes",
     "load_scene",
+    "Trajectory",
+    "trajectory",
 ]

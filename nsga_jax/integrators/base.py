@@ -87,6 +87,7 @@ class Operators(eqx.Module):
     """
 
     M: Matrix | None
+    M_norm: Scalar | None
     K: Matrix | None
     C: Matrix | None
     K_norm: Scalar | None
@@ -142,7 +143,8 @@ def constant_operators(
     s_inv, s_Gt = invert(smooth, smooth_needs_constant_G and nb > 0, slice(0, nb))
     p_inv, p_Gt = invert(position if nc else None, position_needs_constant_G, slice(0, nc))
     v_inv, v_Gt = invert(velocity if nc else None, velocity_needs_constant_G, slice(0, nc))
-    return Operators(M=M, K=K, C=C, K_norm=K_norm, C_norm=C_norm, G=G,
+    M_norm = None if M is None else jnp.linalg.norm(M)
+    return Operators(M=M, M_norm=M_norm, K=K, C=C, K_norm=K_norm, C_norm=C_norm, G=G,
                      smooth_inv=s_inv, smooth_inv_Gt=s_Gt, position_inv=p_inv, position_inv_Gt=p_Gt,
                      velocity_inv=v_inv, velocity_inv_Gt=v_Gt)
 
@@ -209,9 +211,17 @@ def convective(model: Model, q: Vector, v: Vector, bilateral_only: bool = False)
     return jax.jacfwd(lambda x: jax.jacfwd(fn)(x) @ v)(q)
 
 
-def roundoff_floor(scale: Scalar, K_norm, C_norm, q, v) -> Scalar:
+def mass_norm(model: Model, ops: Operators, q: Vector) -> Scalar:
+    """Frobenius norm of M(q) (precomputed for a constant mass)."""
+    return ops.M_norm if ops.M_norm is not None else jnp.linalg.norm(model.mass(q))
+
+
+def roundoff_floor(scale: Scalar, K_norm, C_norm, q, v, inertia: Scalar = 0.0) -> Scalar:
+    """``ROUNDOFF_FACTOR * eps * scale * (||K|| ||q|| + ||C|| ||v|| + inertia)``: the
+    round-off of a residual whose terms cancel; ``inertia`` adds the round-off of
+    an inertia term formed from a difference of velocities (step 1's v̇̃)."""
     eps = jnp.finfo(q.dtype).eps
-    return ROUNDOFF_FACTOR * eps * scale * (K_norm * jnp.linalg.norm(q) + C_norm * jnp.linalg.norm(v))
+    return ROUNDOFF_FACTOR * eps * scale * (K_norm * jnp.linalg.norm(q) + C_norm * jnp.linalg.norm(v) + inertia)
 
 
 def pad_bilateral(model: Model, lam: jax.Array) -> jax.Array:
@@ -310,11 +320,15 @@ class AbstractScheme(eqx.Module):
     Attributes:
         tol_r, tol_f: relative and reference tolerances of eq. 51.
         max_iter: iteration cap of each Newton loop (static).
+        differentiable: make each Newton solve differentiable by the implicit
+            function theorem (:func:`~nsga_jax.integrators.newton.solve`); set by
+            :func:`~nsga_jax.trajectory`. Static.
     """
 
     tol_r: ScalarLike = eqx.field(default=1e-5, converter=as_float)
     tol_f: ScalarLike = eqx.field(default=1e-5, converter=as_float)
     max_iter: int = eqx.field(static=True, default=50)
+    differentiable: bool = eqx.field(static=True, default=False, kw_only=True)
 
     name = "abstract"
 

@@ -21,7 +21,7 @@ from jax import lax
 
 from .._custom_types import Scalar
 from ..models.base import Model
-from ..results import Result
+from ..results import ConfigError, Result
 from .base import (
     DIVERGENCE_FACTOR,
     Operators,
@@ -33,9 +33,9 @@ from .base import (
 )
 from .ds import DS, AbstractGenAlpha
 from .subproblems import (
-    Smooth,
     position_problem,
     projection_start,
+    smooth_motion,
     smooth_problem,
     smooth_start,
     velocity_problem,
@@ -56,6 +56,12 @@ class CS(AbstractGenAlpha):
     """
 
     name = "cs"
+
+    def bounds(self):
+        if self.differentiable:
+            raise ConfigError("CS is not differentiable here (its coupled iteration has no implicit adjoint); "
+                              "use DS, DSn or MJ for gradients")
+        return super().bounds()
 
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         co = self.coefficients
@@ -79,11 +85,10 @@ class CS(AbstractGenAlpha):
         G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
 
         def smooth_res(xs, xp, xv):
-            return smooth_problem(model, ops, co, tol, t, h, offset=(xp[0], xv[0]))
+            return smooth_problem(model, ops, co, tol, t, h, q_pred, v_pred, offset=(xp[0], xv[0]))
 
         def as_smooth(xs):
-            vt, vd, qt, _ = xs
-            return Smooth(q=qt, v=vt, vd=vd, lam=jnp.zeros((model.n_bilateral,), qt.dtype))
+            return smooth_motion(co, h, q_pred, v_pred, xs, jnp.zeros((model.n_bilateral,), q_pred.dtype))
 
         def position_res(xs):
             return position_problem(model, ops, tol, t, h, as_smooth(xs), None, with_forces=False)
@@ -102,7 +107,7 @@ class CS(AbstractGenAlpha):
         def bounds(rs):
             return jnp.stack([r.bound for r in rs])
 
-        x0 = (smooth_start(q_pred, v_pred, model.n_bilateral), projection_start(model, q_pred),
+        x0 = (smooth_start(v_pred, model.n_bilateral), projection_start(model, q_pred),
               projection_start(model, q_pred))
         r0 = residuals(*x0)
         n0 = norms(r0)
@@ -139,7 +144,8 @@ class CS(AbstractGenAlpha):
         result = jnp.where(converged, jnp.int8(Result.successful),
                            jnp.where(diverged, jnp.int8(Result.coupled_diverged), jnp.int8(Result.coupled_max_iter)))
 
-        vt, vd, qt, _ = xs
+        smooth = as_smooth(xs)
+        qt, vt, vd = smooth.q, smooth.v, smooth.vd
         U, W = xp[0], xv[0]
         active_p, xi, g, _ = rp.aux
         active_v, sigma, gdot = rv.aux

@@ -37,11 +37,11 @@ from .base import (
     result_code,
 )
 from .coefficients import GenAlphaCoefficients
-from .newton import newton
+from .newton import solve
 from .subproblems import (
-    Smooth,
     position_problem,
     projection_start,
+    smooth_motion,
     smooth_problem,
     smooth_start,
     velocity_problem,
@@ -114,11 +114,13 @@ class DS(AbstractGenAlpha):
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
 
+        diff = self.differentiable
         # 1. smooth motion
-        residual, update = smooth_problem(model, ops, self.coefficients, tol, t, h)
-        sol_s = newton(residual, update, smooth_start(q_pred, v_pred, model.n_bilateral), self.max_iter)
-        vt, vd, qt, _ = sol_s.x
-        smooth = Smooth(q=qt, v=vt, vd=vd, lam=sol_s.aux)
+        co = self.coefficients
+        sol_s = solve(smooth_problem, (model, ops, co, tol, t, h, q_pred, v_pred),
+                      smooth_start(v_pred, model.n_bilateral), self.max_iter, diff)
+        smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
+        qt, vt, vd = smooth.q, smooth.v, smooth.vd
         if model.n_constraints == 0:  # nothing to project: U = W = 0 exactly
             zero = jnp.zeros(())
             out = make_output(model, t, qt, vt, smooth.lam, [sol_s.iterations, 0, 0],
@@ -128,15 +130,14 @@ class DS(AbstractGenAlpha):
 
         f_smooth = model.force(qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
-        residual, update = position_problem(model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces)
-        sol_p = newton(residual, update, projection_start(model, qt), self.max_iter)
+        sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces),
+                      projection_start(model, qt), self.max_iter, diff)
         U, _ = sol_p.x
         active_p, xi, g, _ = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
-        residual, update = velocity_problem(model, ops, tol, t, h, smooth, U, active_p, f_smooth,
-                                            G_prev_v_prev, self.nonsmooth_forces)
-        sol_v = newton(residual, update, projection_start(model, qt), self.max_iter)
+        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, active_p, f_smooth, G_prev_v_prev,
+                                         self.nonsmooth_forces), projection_start(model, qt), self.max_iter, diff)
         W, _ = sol_v.x
         active_v, sigma, gdot = sol_v.aux
 

@@ -41,7 +41,7 @@ from .base import (
     tangents,
 )
 from .linalg import dense_solve, inverse_solve, solve_bordered
-from .newton import Residual, convergence_bound, newton
+from .newton import Residual, convergence_bound, solve
 
 
 class MJ(AbstractScheme):
@@ -74,60 +74,20 @@ class MJ(AbstractScheme):
         return StepState(t=jnp.asarray(t0, dtype=float), q=q0, v=v0, vd=zero, a=zero)
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
-        tol_r, tol_f, max_iter = self.tolerances
-        n, nb = model.n_dof, model.n_bilateral
-        th = self.theta
+        tol = self.tolerances
         t = state.t + h
         q_n, v_n = state.q, state.v
         f_n = model.force(q_n, v_n, state.t)
-        kv = pv = Scaling.of(model, h).kv
-        unilateral = is_unilateral(model)
+        candidates = restituted = None
         if model.n_constraints:
             closing = model.constraints(q_n + 0.5 * h * v_n) <= 0.0
-            candidates = ~unilateral | closing
+            candidates = ~is_unilateral(model) | closing
             restituted = restitution(model, q_n.dtype) * (constraint_jacobian(model, ops, q_n) @ v_n)
-
-        def position(v):
-            return q_n + h * (th * v + (1.0 - th) * v_n)
-
-        def residual(x):
-            v, Lam = x
-            q = position(v)
-            inertia = model.mass_product(q, v - v_n)
-            force = h * (th * model.force(q, v, t) + (1.0 - th) * f_n)
-            if model.n_constraints == 0:
-                return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())
-            G = constraint_jacobian(model, ops, q)
-            gdot = G @ v + restituted
-            res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
-            return res._replace(aux=res.aux + (gdot,))
-
-        def update(x, res):
-            v, Lam = x
-            q = position(v)
-            K, C, K_norm, C_norm = tangents(model, ops, q, v, t)
-            floor = roundoff_floor(h, K_norm, C_norm, q, v)
-            if ops.velocity_inv is not None:
-                solve = inverse_solve(ops.velocity_inv)
-            else:
-                A = mass_matrix(model, ops, q) + h * th * C + (h * th) ** 2 * K
-                A = A + h * th * model.inertia_stiffness(q, v - v_n)
-                if model.n_constraints:
-                    active, sigma, _ = res.aux
-                    A = A - h * th * curvature(model, q, jnp.where(active, sigma, 0.0))
-                solve = dense_solve(A)
-            if model.n_constraints == 0:
-                return (-solve(res.r), Lam), floor
-            G = constraint_jacobian(model, ops, q)
-            G_low = G + h * th * convective(model, q, v)
-            dv, dLam = solve_bordered(solve, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv,
-                                      ops.velocity_inv_Gt)
-            return (dv, dLam), floor
-
+        args = (model, ops, tol, t, h, self.theta, q_n, v_n, f_n, candidates, restituted)
         x0 = (v_n, jnp.zeros((model.n_constraints,), q_n.dtype))
-        sol = newton(residual, update, x0, max_iter)
+        sol = solve(moreau_jean_problem, args, x0, self.max_iter, self.differentiable)
         v, _ = sol.x
-        q = position(v)
+        q = q_n + h * (self.theta * v + (1.0 - self.theta) * v_n)
         zero = jnp.zeros(())
         code = result_code([sol])
         code = jnp.where(code == 0, code, code + 2)  # MJ's one problem is reported as the velocity one
@@ -135,7 +95,56 @@ class MJ(AbstractScheme):
         if model.n_constraints:
             active, sigma, gdot = sol.aux
             kwargs = dict(impulse=jnp.where(active, sigma, 0.0), gdot=gdot, active_velocity=active)
-        out = make_output(model, t, q, v, jnp.zeros((nb,), q.dtype), [0, 0, sol.iterations],
+        out = make_output(model, t, q, v, jnp.zeros((model.n_bilateral,), q.dtype), [0, 0, sol.iterations],
                           [zero, zero, sol.residual_norm], [zero, zero, sol.tolerance], code, **kwargs)
         zero_n = jnp.zeros_like(q)
         return StepState(t=t, q=q, v=v, vd=zero_n, a=zero_n), out
+
+
+def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n, f_n, candidates, restituted):
+    """The Moreau–Jean step as a Newton problem on x = (v_{n+1}, Λ):
+    ``[M(q)(v - v_n) - h (θ f(q, v) + (1-θ) f_n) - g_q^{B T} σ^B;  -kv ġ^B;  -(kv²/pv) Λ^{B̄}]``,
+    q = q_n + h (θ v + (1-θ) v_n), ġ = g_q(q) v + e g_q(q_n) v_n, B = candidates ∩ {σ >= 0}."""
+    tol_r, tol_f, _ = tol
+    n = model.n_dof
+    kv = pv = Scaling.of(model, h).kv
+    unilateral = is_unilateral(model)
+
+    def position(v):
+        return q_n + h * (theta * v + (1.0 - theta) * v_n)
+
+    def residual(x):
+        v, Lam = x
+        q = position(v)
+        inertia = model.mass_product(q, v - v_n)
+        force = h * (theta * model.force(q, v, t) + (1.0 - theta) * f_n)
+        if model.n_constraints == 0:
+            return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())
+        G = constraint_jacobian(model, ops, q)
+        gdot = G @ v + restituted
+        res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
+        return res._replace(aux=res.aux + (gdot,))
+
+    def update(x, res):
+        v, Lam = x
+        q = position(v)
+        K, C, K_norm, C_norm = tangents(model, ops, q, v, t)
+        floor = roundoff_floor(h, K_norm, C_norm, q, v)
+        if ops.velocity_inv is not None:
+            solve_A = inverse_solve(ops.velocity_inv)
+        else:
+            A = mass_matrix(model, ops, q) + h * theta * C + (h * theta) ** 2 * K
+            A = A + h * theta * model.inertia_stiffness(q, v - v_n)
+            if model.n_constraints:
+                active, sigma, _ = res.aux
+                A = A - h * theta * curvature(model, q, jnp.where(active, sigma, 0.0))
+            solve_A = dense_solve(A)
+        if model.n_constraints == 0:
+            return (-solve_A(res.r), Lam), floor
+        G = constraint_jacobian(model, ops, q)
+        G_low = G + h * theta * convective(model, q, v)
+        dv, dLam = solve_bordered(solve_A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv,
+                                  ops.velocity_inv_Gt)
+        return (dv, dLam), floor
+
+    return residual, update

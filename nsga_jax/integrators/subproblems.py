@@ -3,9 +3,9 @@
 Each builder returns the pair ``(residual, update)`` that
 :func:`~nsga_jax.integrators.newton.newton` iterates:
 
-- :func:`smooth_problem` (eqs. 33-34, matrix 47): unknowns x = (ṽ, v̇̃, q̃, λ̃),
-  incremented together by Δṽ through (44b-c), and the scaled bilateral
-  multipliers; unilateral constraints ignored;
+- :func:`smooth_problem` (eqs. 33-34, matrix 47): unknowns x = (ṽ, λ̃), the
+  smooth velocity and the scaled bilateral multipliers, with v̇̃ and q̃ affine in
+  ṽ by (44b-c); unilateral constraints ignored;
 - :func:`position_problem` (eqs. 37-38, matrix 48): x = (U, ν), q = q̃ + U,
   active set A from ξ = kp ν - pp g(q), with or without the h² f^p term (29);
 - :func:`velocity_problem` (eqs. 40-43, matrix 49): x = (W, Λ), v = ṽ + W,
@@ -36,6 +36,7 @@ from .base import (
     force_change,
     is_unilateral,
     mass_matrix,
+    mass_norm,
     pad_bilateral,
     restitution,
     roundoff_floor,
@@ -56,24 +57,30 @@ class Smooth(NamedTuple):
 
 
 def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, t: Scalar, h: Scalar,
-                   offset: tuple[Vector, Vector] | None = None):
+                   q_pred: Vector, v_pred: Vector, offset: tuple[Vector, Vector] | None = None):
     """Step 1: residual [M(q) v̇̃ - f(q, v, t) - g_q^T (ks λ̃ - ps g_q ṽ);  -ks g_q ṽ].
 
-    DS evaluates it at the smooth motion, q = q̃, v = ṽ; CS (``offset=(U, W)``)
-    at the total motion q = q̃ + U, v = ṽ + W, keeping the bilateral velocity
-    constraint on ṽ. The residual's ``aux`` is the physical λ̃ = ks λ - ps g_q ṽ.
+    The unknowns are x = (ṽ, λ̃_scaled); v̇̃ and q̃ follow from ṽ and the predictor
+    by (44b-c): v̇̃ = c_vd (ṽ - ṽ_pred), q̃ = q̃_pred + c_q (ṽ - ṽ_pred)
+    (:func:`smooth_motion`). DS evaluates the residual at the smooth motion,
+    q = q̃, v = ṽ; CS (``offset=(U, W)``) at the total motion q = q̃ + U,
+    v = ṽ + W, keeping the bilateral velocity constraint on ṽ. The residual's
+    ``aux`` is the physical λ̃ = ks λ - ps g_q ṽ.
     """
     tol_r, tol_f, _ = tol
     n, nb = model.n_dof, model.n_bilateral
     ks = ps = Scaling.of(model, h).ks
     c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
 
-    def total(qt, vt):
-        return (qt, vt) if offset is None else (qt + offset[0], vt + offset[1])
+    def state(vt):
+        qt = q_pred + c_q * (vt - v_pred)
+        vd = c_vd * (vt - v_pred)
+        q, v = (qt, vt) if offset is None else (qt + offset[0], vt + offset[1])
+        return qt, vd, q, v
 
     def residual(x):
-        vt, vd, qt, lam = x
-        q, v = total(qt, vt)
+        vt, lam = x
+        _, vd, q, v = state(vt)
         f = model.force(q, v, t)
         inertia = model.mass_product(q, vd)
         if nb == 0:
@@ -86,30 +93,37 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
         return Residual(r, convergence_bound([inertia, f, reaction, r2], tol_r, tol_f), mu)
 
     def update(x, res):
-        vt, vd, qt, lam = x
-        q, v = total(qt, vt)
+        vt, lam = x
+        _, vd, q, v = state(vt)
         K, C, K_norm, C_norm = tangents(model, ops, q, v, t)
-        floor = roundoff_floor(1.0, K_norm, C_norm, q, v)
+        # v̇̃ = c_vd (ṽ - ṽ_pred) cancels: its round-off is eps c_vd ||M|| ||ṽ||
+        floor = roundoff_floor(1.0, K_norm, C_norm, q, v, c_vd * mass_norm(model, ops, q) * jnp.linalg.norm(vt))
         if ops.smooth_inv is not None:
             solve = inverse_solve(ops.smooth_inv)
         else:
             Ks = K + model.inertia_stiffness(q, vd) - curvature(model, q, pad_bilateral(model, res.aux))
             solve = dense_solve(c_vd * mass_matrix(model, ops, q) + C + c_q * Ks)
         if nb == 0:
-            dv, dlam = -solve(res.r), jnp.zeros((0,), vt.dtype)
-        else:
-            GB = bilateral_jacobian(model, ops, q)
-            G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
-            dv, dlam = solve_bordered(solve, res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool),
-                                      ks, ps, ops.smooth_inv_Gt)
-        return (dv, c_vd * dv, c_q * dv, dlam), floor
+            return (-solve(res.r), jnp.zeros((0,), vt.dtype)), floor
+        GB = bilateral_jacobian(model, ops, q)
+        G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
+        dv, dlam = solve_bordered(solve, res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool),
+                                  ks, ps, ops.smooth_inv_Gt)
+        return (dv, dlam), floor
 
     return residual, update
 
 
-def smooth_start(q_pred: Vector, v_pred: Vector, nb: int):
-    """Newton's starting point of step 1: the predictor, v̇̃ = 0, λ̃ = 0."""
-    return (v_pred, jnp.zeros_like(v_pred), q_pred, jnp.zeros((nb,), q_pred.dtype))
+def smooth_start(v_pred: Vector, nb: int):
+    """Newton's starting point of step 1: the predictor's ṽ (v̇̃ = 0), λ̃ = 0."""
+    return (v_pred, jnp.zeros((nb,), v_pred.dtype))
+
+
+def smooth_motion(co: GenAlphaCoefficients, h: Scalar, q_pred: Vector, v_pred: Vector, x, lam_physical) -> Smooth:
+    """The smooth motion (q̃, ṽ, v̇̃, λ̃) from step 1's unknowns x = (ṽ, λ̃_scaled), by (44b-c)."""
+    vt, _ = x
+    dv = vt - v_pred
+    return Smooth(q=q_pred + co.q_per_v(h) * dv, v=vt, vd=co.vd_per_v(h) * dv, lam=lam_physical)
 
 
 def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth,

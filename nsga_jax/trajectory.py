@@ -1,0 +1,143 @@
+"""A differentiable trajectory: ``trajectory(model, scheme, t0, h, n_steps, q0, v0)``.
+
+Unlike :func:`~nsga_jax.simulate` (a host-driven loop over compiled chunks,
+with progress, files and named errors), this is one pure JAX function of the
+model, the scheme's settings and the initial state: ``jit``, ``vmap``,
+``jax.grad``, ``jax.jacfwd`` and ``jax.jvp`` all apply.
+
+- Each Newton sub-problem is differentiated implicitly (implicit function
+  theorem at the converged solution, active set frozen), never by unrolling
+  its iterations: :func:`nsga_jax.integrators.newton.solve`.
+- The step loop is a ``lax.scan`` over chunks of steps with ``jax.checkpoint``
+  on each chunk and on each step: reverse mode stores one state per chunk and
+  recomputes a chunk during the backward pass, so its memory grows like
+  N/c + c states (c = ``checkpoint_every``, √N by default) plus what the loop
+  outputs. Pass ``observe`` to output only what a loss needs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from ._custom_types import Scalar
+from .integrators.base import AbstractScheme, StepOutput, StepState
+from .models.base import Model
+from .results import Result
+
+
+class Trajectory(eqx.Module):
+    """Times, states and per-step records of a differentiable run.
+
+    ``ts`` (N+1,); ``q``, ``v`` (N+1, n); ``records``: the stacked
+    :class:`~nsga_jax.integrators.base.StepOutput` of the N steps (or what
+    ``observe`` returned); ``h`` the step [s]; ``gap0`` the gaps at t0.
+    ``impulse`` and ``gap`` have the initial row prepended, like a
+    :class:`~nsga_jax.Solution`, so scene observables apply to both.
+    """
+
+    ts: jax.Array
+    q: jax.Array
+    v: jax.Array
+    records: Any
+    h: Scalar
+    gap0: jax.Array
+
+    @property
+    def impulse(self) -> jax.Array:
+        imp = self.records.impulse
+        return jnp.concatenate([jnp.zeros((1,) + imp.shape[1:], imp.dtype), imp])
+
+    @property
+    def gap(self) -> jax.Array:
+        return jnp.concatenate([self.gap0[None], self.records.gap])
+
+    @property
+    def failed(self) -> jax.Array:
+        """Whether any step failed (Newton cap or non-finite value)."""
+        return jnp.any(self.records.result != Result.successful)
+
+
+def trajectory(
+    model: Model,
+    scheme: AbstractScheme,
+    t0,
+    h,
+    n_steps: int,
+    q0,
+    v0,
+    *,
+    checkpoint_every: int | None = None,
+    observe: Callable[[StepState, StepOutput], Any] | None = None,
+    throw: bool = True,
+) -> Trajectory:
+    """Integrate ``n_steps`` steps of size ``h`` from (t0, q0, v0), differentiably.
+
+    Args:
+        model, scheme: as for :func:`~nsga_jax.simulate` (DS, DSn or MJ; CS
+            has no implicit adjoint here).
+        t0, h: start time and step size [s] (traced: no recompilation when they change).
+        n_steps: number of steps (static).
+        q0, v0: initial coordinates and velocities (n,).
+        checkpoint_every: steps per checkpointed chunk (default ⌈√N⌉).
+        observe: ``(state, record) -> pytree`` evaluated after each step and
+            stacked in ``records`` instead of the full record (``q`` and ``v``
+            are then not stored either; they are empty).
+        throw: raise at run time (``eqx.error_if``) if any step fails; with
+            ``False`` failures are only in ``records.result`` (full records) or
+            nowhere (``observe``).
+
+    Returns:
+        A :class:`Trajectory`.
+    """
+    if not isinstance(n_steps, int) or n_steps < 1:
+        raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+    scheme = dataclasses.replace(scheme, differentiable=True)
+    scheme.bounds()  # schemes without an implicit adjoint refuse here
+    dtype = jnp.result_type(float)
+    t0 = jnp.asarray(t0, dtype)
+    h = jnp.asarray(h, dtype)
+    q0 = jnp.asarray(q0, dtype)
+    v0 = jnp.asarray(v0, dtype)
+    ops = scheme.prepare(model, h, t0)
+    state0 = scheme.init(model, t0, q0, v0)
+
+    c = checkpoint_every or max(1, math.ceil(math.sqrt(n_steps)))
+    n_chunks = -(-n_steps // c)
+
+    @jax.checkpoint
+    def one_step(state, k):
+        new, out = scheme.step(model, ops, state, h)
+        state = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new, state)
+        kept = out if observe is None else (observe(new, out), out.result)
+        return state, kept
+
+    @jax.checkpoint
+    def chunk(state, ks):
+        return lax.scan(one_step, state, ks)
+
+    _, outs = lax.scan(chunk, state0, jnp.arange(n_chunks * c).reshape(n_chunks, c))
+    outs = jax.tree_util.tree_map(lambda x: x.reshape((n_chunks * c,) + x.shape[2:])[:n_steps], outs)
+    if observe is None:
+        records, result = outs, outs.result
+        q = jnp.concatenate([q0[None], records.q])
+        v = jnp.concatenate([v0[None], records.v])
+    else:
+        records, result = outs
+        q = v = jnp.zeros((0, model.n_dof), dtype)
+    ts = t0 + h * jnp.arange(n_steps + 1, dtype=dtype)
+    if throw:
+        ts = eqx.error_if(
+            ts, jnp.any(result != Result.successful),
+            "a step failed (Newton iteration cap or a non-finite value); call nsga_jax.simulate with the "
+            "same model and scheme for the step, time and sub-problem, or pass throw=False",
+        )
+    gap0 = model.unilateral(q0)
+    return Trajectory(ts=ts, q=q, v=v, records=records, h=h, gap0=gap0)
