@@ -8,7 +8,7 @@ from . import (  # noqa: F401  (registration)
     rigid_box,
     rigid_pendulum,
 )
-from .base import REGISTRY, Scene, SceneSpec, load_scene, parse_override
+from .base import REGISTRY, Scene, SceneSpec, load_scene, parametrize, parse_override
 from .params import SOLVER_PARAMS, Param
 
-__all__ = ["REGISTRY", "Scene", "SceneSpec", "load_scene", "parse_override", "Param", "SOLVER_PARAMS"]
+__all__ = ["REGISTRY", "Scene", "SceneSpec", "load_scene", "parametrize", "parse_override", "Param", "SOLVER_PARAMS"]

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import numpy as np
+import jax.numpy as jnp
 
 from ..exact import bouncing_ball
 from ..models.point_mass import BouncingBall
-from .base import Scene, SceneSpec, register
+from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
 
 PARAMETERS = {
@@ -19,20 +19,25 @@ PARAMETERS = {
 }
 
 
-def build(p, solver) -> Scene:
+def make(p, concrete):
     model = BouncingBall(m=p["mass"], gravity=p["gravity"], e=p["e"])
+    q0 = jnp.reshape(jnp.asarray(p["height"], float), (1,))
+    v0 = jnp.reshape(jnp.asarray(p["velocity"], float), (1,))
 
     def observe(sol):
         z, vz = sol.q[:, 0], sol.v[:, 0]
         energy = 0.5 * p["mass"] * vz**2 + p["mass"] * p["gravity"] * z
         return {"z": z, "vz": vz, "force": sol.impulse[:, 0] / sol.h, "energy": energy}
 
-    def exact(ts):
+    return model, q0, v0, observe
+
+
+def exact(p):
+    def solution(ts):
         z, vz = bouncing_ball(ts, p["height"], p["velocity"], p["gravity"], p["e"])
         return {"z": z, "vz": vz}
 
-    return Scene("bouncing_ball", model, np.array([p["height"]]), np.array([p["velocity"]]),
-                 p, solver, observe, exact)
+    return solution
 
 
 SPEC = register(
@@ -41,7 +46,8 @@ SPEC = register(
         description="Point mass dropped on a rigid floor (exact solution known)",
         parameters=PARAMETERS,
         solver_defaults={"h": 1e-3, "t_end": 3.0},
-        build=build,
+        make=make,
+        exact=exact,
         observables=("z", "vz", "force", "energy"),
         error_observables=("z", "vz"),
     )

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import numpy as np
+import jax.numpy as jnp
 
 from ..models.bar import ElasticBar
 from ..results import ConfigError
-from .base import Scene, SceneSpec, register
+from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
 
 PARAMETERS = {
@@ -25,23 +25,28 @@ PARAMETERS = {
 NODE_045_FROM_TIP = 0.45  # m, the paper's Fig. 5(a)/6(b) observation point
 
 
-def build(p, solver) -> Scene:
-    ne = p["n_elements"]
-    le = p["length"] / ne
-    node045 = ne - int(round(NODE_045_FROM_TIP / le))
-    if not 0 <= node045 <= ne:
-        raise ConfigError(f"the bar (length {p['length']} m) is shorter than {NODE_045_FROM_TIP} m")
-    model = ElasticBar(E=p["E"], rho=p["rho"], area=p["area"], length=p["length"], gap0=p["gap"],
-                       e=p["e"], n_elements=ne, lumped=p["mass_matrix"] == "lumped")
-    q0 = np.zeros(ne + 1)
-    v0 = np.full(ne + 1, p["velocity"])
+def _node045(concrete) -> int:
+    return concrete["n_elements"] - int(round(NODE_045_FROM_TIP * concrete["n_elements"] / concrete["length"]))
 
-    zeros = np.zeros(ne + 1)
-    M = np.asarray(model.mass(zeros))
-    K = np.asarray(model.tangents(zeros, zeros, 0.0)[0])
+
+def check(p):
+    if not 0 <= _node045(p) <= p["n_elements"]:
+        raise ConfigError(f"the bar (length {p['length']} m) is shorter than {NODE_045_FROM_TIP} m")
+
+
+def make(p, concrete):
+    ne = concrete["n_elements"]
+    node045 = _node045(concrete)
+    model = ElasticBar(E=p["E"], rho=p["rho"], area=p["area"], length=p["length"], gap0=p["gap"],
+                       e=p["e"], n_elements=ne, lumped=concrete["mass_matrix"] == "lumped")
+    q0 = jnp.zeros(ne + 1)
+    v0 = jnp.full(ne + 1, p["velocity"], dtype=float)
 
     def observe(sol):
-        energy = 0.5 * np.einsum("ti,ij,tj->t", sol.v, M, sol.v) + 0.5 * np.einsum("ti,ij,tj->t", sol.q, K, sol.q)
+        zeros = jnp.zeros(ne + 1)
+        M = model.mass(zeros)
+        K = model.tangents(zeros, zeros, 0.0)[0]
+        energy = 0.5 * jnp.einsum("ti,ij,tj->t", sol.v, M, sol.v) + 0.5 * jnp.einsum("ti,ij,tj->t", sol.q, K, sol.q)
         return {
             "tip_u": sol.q[:, -1],
             "tip_v": sol.v[:, -1],
@@ -52,7 +57,7 @@ def build(p, solver) -> Scene:
             "energy": energy,
         }
 
-    return Scene("impacting_bar", model, q0, v0, p, solver, observe)
+    return model, q0, v0, observe
 
 
 SPEC = register(
@@ -61,7 +66,8 @@ SPEC = register(
         description="Elastic bar (200 linear elements) hitting a rigid wall, paper §4.2",
         parameters=PARAMETERS,
         solver_defaults={"h": 1e-3, "t_end": 1.5},
-        build=build,
+        make=make,
+        check=check,
         observables=("tip_u", "tip_v", "node045_u", "node045_v", "tip_gap", "tip_force", "energy"),
         error_observables=("node045_u", "node045_v", "tip_u", "tip_v"),
     )

@@ -5,12 +5,13 @@ The rigid body is in natural coordinates (12 coordinates, constant mass matrix,
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..elements.rigid_body import box_inertia, box_vertices, natural_velocities
 from ..models.rigid_body import RigidBody
 from ..results import ConfigError
-from .base import Scene, SceneSpec, register
+from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
 
 PARAMETERS = {
@@ -35,47 +36,57 @@ PARAMETERS = {
 }
 
 
-def rotation(roll: float, pitch: float) -> np.ndarray:
-    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
-    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+def rotation(roll, pitch):
+    """R = R_y(pitch) R_x(roll), shape (3, 3)."""
+    cr, sr, cp, sp = jnp.cos(roll), jnp.sin(roll), jnp.cos(pitch), jnp.sin(pitch)
+    one, zero = jnp.ones_like(cr), jnp.zeros_like(cr)
+    Rx = jnp.array([[one, zero, zero], [zero, cr, -sr], [zero, sr, cr]])
+    Ry = jnp.array([[cp, zero, sp], [zero, one, zero], [-sp, zero, cp]])
     return Ry @ Rx
 
 
-def build(p, solver) -> Scene:
-    sides = np.array([p["lx"], p["ly"], p["lz"]])
-    vertices = np.asarray(box_vertices(sides))
-    R0 = rotation(p["roll"], p["pitch"])
-    r0 = np.array([p["x0"], p["y0"], p["z0"]])
-    contact = p["floor"] == "on"
-    if contact:
-        lowest = (r0 + vertices @ R0.T)[:, 2].min()
+def _sides(p):
+    return jnp.stack([jnp.asarray(p[k], float) for k in ("lx", "ly", "lz")])
+
+
+def check(p):
+    if p["floor"] == "on":
+        vertices = np.asarray(box_vertices(_sides(p)))
+        R0 = np.asarray(rotation(p["roll"], p["pitch"]))
+        lowest = (p["z0"] + vertices @ R0.T[:, 2]).min()
         if lowest < 0.0:
             raise ConfigError(f"initial penetration: the lowest vertex is at z = {lowest:.6g} m; raise z0")
+
+
+def make(p, concrete):
+    sides = _sides(p)
+    vertices = box_vertices(sides)
+    R0 = rotation(p["roll"], p["pitch"])
+    r0 = jnp.stack([jnp.asarray(p[k], float) for k in ("x0", "y0", "z0")])
     model = RigidBody(
         mass_=p["mass"], inertia=box_inertia(p["mass"], sides), points=vertices, gravity=p["gravity"],
-        floor_z=0.0, e=np.full(8, p["e"]), size=0.5 * np.linalg.norm(sides), contact=contact,
+        floor_z=0.0, e=jnp.full(8, p["e"]), size=0.5 * jnp.linalg.norm(sides), contact=concrete["floor"] == "on",
     )
-    q0 = np.concatenate([r0, R0[:, 0], R0[:, 1], R0[:, 2]])
-    omega0 = R0 @ np.array([p["omega_x"], p["omega_y"], p["omega_z"]])
-    v0 = np.asarray(natural_velocities(R0, omega0, np.array([p["vx0"], p["vy0"], p["vz0"]])))
-    M = np.asarray(model.mass(q0))
+    q0 = jnp.concatenate([r0, R0[:, 0], R0[:, 1], R0[:, 2]])
+    omega0 = R0 @ jnp.stack([jnp.asarray(p[k], float) for k in ("omega_x", "omega_y", "omega_z")])
+    v0 = natural_velocities(R0, omega0, jnp.stack([jnp.asarray(p[k], float) for k in ("vx0", "vy0", "vz0")]))
 
     def observe(sol):
         q, v = sol.q, sol.v
-        R = np.stack([q[:, 3:6], q[:, 6:9], q[:, 9:12]], axis=2)
-        Rdot = np.stack([v[:, 3:6], v[:, 6:9], v[:, 9:12]], axis=2)
-        omega = 0.5 * sum(np.cross(R[:, :, i], Rdot[:, :, i]) for i in range(3))
+        M = model.mass(q0)
+        R = jnp.stack([q[:, 3:6], q[:, 6:9], q[:, 9:12]], axis=2)
+        Rdot = jnp.stack([v[:, 3:6], v[:, 6:9], v[:, 9:12]], axis=2)
+        omega = 0.5 * sum(jnp.cross(R[:, :, i], Rdot[:, :, i]) for i in range(3))
         out = {"x": q[:, 0], "y": q[:, 1], "z": q[:, 2], "vx": v[:, 0], "vy": v[:, 1], "vz": v[:, 2],
                "omega_x": omega[:, 0], "omega_y": omega[:, 1], "omega_z": omega[:, 2]}
-        for k, X in enumerate(vertices):
-            out[f"gap_{k}"] = q[:, 2] + R[:, 2, :] @ X
-            out[f"gapdot_{k}"] = v[:, 2] + Rdot[:, 2, :] @ X
-        out["energy"] = 0.5 * np.einsum("ti,ij,tj->t", v, M, v) + p["mass"] * p["gravity"] * q[:, 2]
+        for k in range(8):
+            out[f"gap_{k}"] = q[:, 2] + R[:, 2, :] @ vertices[k]
+            out[f"gapdot_{k}"] = v[:, 2] + Rdot[:, 2, :] @ vertices[k]
+        out["energy"] = 0.5 * jnp.einsum("ti,ij,tj->t", v, M, v) + p["mass"] * p["gravity"] * q[:, 2]
         out["rotation"] = R
         return out
 
-    return Scene("rigid_box", model, q0, v0, p, solver, observe)
+    return model, q0, v0, observe
 
 
 SPEC = register(
@@ -84,7 +95,8 @@ SPEC = register(
         description="Spinning rigid box (natural coordinates) bouncing on a floor, paper §4.1",
         parameters=PARAMETERS,
         solver_defaults={"h": 1e-3, "t_end": 0.69},
-        build=build,
+        make=make,
+        check=check,
         observables=("x", "y", "z", "vx", "vy", "vz", "omega_x", "omega_y", "omega_z",
                      *(f"gap_{k}" for k in range(8)), *(f"gapdot_{k}" for k in range(8)), "energy", "rotation"),
         error_observables=("gap_5", "gapdot_5"),  # x_p: the vertex that hits the floor

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
+import jax.numpy as jnp
 
 from ..models.point_mass import RigidPendulum
 from ..results import ConfigError
-from .base import Scene, SceneSpec, register
+from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
 
 PARAMETERS = {
@@ -24,17 +24,23 @@ PARAMETERS = {
 }
 
 
-def build(p, solver) -> Scene:
-    length, th, om = p["length"], p["angle"], p["omega"]
-    q0 = np.array([length * math.sin(th), -length * math.cos(th)])
-    v0 = length * om * np.array([math.cos(th), math.sin(th)])
-    offset = q0[0] - p["wall_x"]
-    if abs(offset) <= 1e-12 * max(1.0, length):
+def _side(concrete) -> float:
+    return math.copysign(1.0, concrete["length"] * math.sin(concrete["angle"]) - concrete["wall_x"])
+
+
+def check(p):
+    if abs(p["length"] * math.sin(p["angle"]) - p["wall_x"]) <= 1e-12 * max(1.0, p["length"]):
         raise ConfigError(
             f"the mass starts on the wall (x = wall_x = {p['wall_x']}): the admissible side is "
             "undefined; move the wall or change the initial angle"
         )
-    side = math.copysign(1.0, offset)
+
+
+def make(p, concrete):
+    length, th, om = p["length"], p["angle"], p["omega"]
+    q0 = jnp.stack([length * jnp.sin(th), -length * jnp.cos(th)])
+    v0 = length * om * jnp.stack([jnp.cos(th), jnp.sin(th)])
+    side = _side(concrete)
     model = RigidPendulum(m=p["mass"], length=length, gravity=p["gravity"], wall_x=p["wall_x"], side=side, e=p["e"])
 
     def observe(sol):
@@ -43,12 +49,12 @@ def build(p, solver) -> Scene:
         return {
             "x": x, "y": y, "vx": vx, "vy": vy,
             "gap": side * (x - p["wall_x"]),
-            "constraint": np.hypot(x, y) - length,
+            "constraint": jnp.hypot(x, y) - length,
             "force": sol.impulse[:, 1] / sol.h,
             "energy": energy,
         }
 
-    return Scene("rigid_pendulum", model, q0, v0, p, solver, observe)
+    return model, q0, v0, observe
 
 
 SPEC = register(
@@ -57,7 +63,8 @@ SPEC = register(
         description="Point mass on a rigid rod (nonlinear bilateral constraint) hitting a wall",
         parameters=PARAMETERS,
         solver_defaults={"h": 1e-3, "t_end": 5.0},
-        build=build,
+        make=make,
+        check=check,
         observables=("x", "y", "vx", "vy", "gap", "constraint", "force", "energy"),
         error_observables=("x", "vx"),
     )
