@@ -1,4 +1,4 @@
-"""Command-line interface: ``nsga-jax run | scenes | config``."""
+"""Command-line interface: ``nsga-jax run | convergence | identify | scenes | config``."""
 
 from __future__ import annotations
 
@@ -44,6 +44,31 @@ def _parser() -> argparse.ArgumentParser:
                       help="how the step sizes run: vmap over groups of similar step counts (default), one "
                            "padded vmap, or separate runs (see experiments/bench_batch_h.py)")
     conv.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_convergence)")
+
+    ident = sub.add_parser("identify", help="fit scene parameters to measured (or synthetic) motion by "
+                                            "gradient descent through the simulation")
+    ident.add_argument("scene", help="scene name or .toml config")
+    ident.add_argument("--params", required=True, help="comma-separated float parameters to identify, e.g. E,e")
+    source = ident.add_mutually_exclusive_group(required=True)
+    source.add_argument("--data", type=Path, help="measured data: .csv (header t,OBS,...) or .npz (t, OBS...)")
+    source.add_argument("--synthetic", action="store_true",
+                        help="make the data by simulating the scene with the --true values")
+    ident.add_argument("--true", action="append", default=[], metavar="KEY=VALUE",
+                       help="true parameter value for --synthetic (repeatable; default: the scene's)")
+    ident.add_argument("--initial", action="append", default=[], metavar="KEY=VALUE",
+                       help="starting value (repeatable; default: the scene's)")
+    ident.add_argument("--observables", help="observables to fit for --synthetic (default: the scene's first)")
+    ident.add_argument("--noise", type=float, default=0.0,
+                       help="--synthetic: Gaussian noise, as a fraction of each observable's RMS")
+    ident.add_argument("--every", type=int, default=1, help="--synthetic: keep every n-th step as a sample")
+    ident.add_argument("--seed", type=int, default=0, help="--synthetic: seed of the noise")
+    ident.add_argument("--optimizer", choices=("lbfgs", "adam"), default="lbfgs")
+    ident.add_argument("--max-steps", type=int, default=100, help="optimiser iterations at most")
+    ident.add_argument("--learning-rate", type=float, default=0.05, help="Adam's step (scaled parameters)")
+    ident.add_argument("--h", type=float, help="step size [s]")
+    ident.add_argument("--t-end", type=float, help="--synthetic: end time [s]")
+    ident.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
+    ident.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_identify)")
 
     sub.add_parser("scenes", help="list the built-in scenes and their parameters")
     cfg = sub.add_parser("config", help="print a scene's default TOML config")
@@ -130,6 +155,65 @@ def _convergence(args) -> int:
     return 0
 
 
+def _assignments(items: list[str]) -> dict:
+    """``["a=1,b=2", "c=3"]`` -> ``{"a": 1.0, "b": 2.0, "c": 3.0}``."""
+    parts = [part for item in items for part in item.split(",") if part.strip()]
+    for part in parts:
+        if "=" not in part:
+            raise ConfigError(f"expected KEY=VALUE, got {part!r}")
+    return dict(parse_override(part) for part in parts)
+
+
+def _identify(args) -> int:
+    from .identify import Data, identify, synthetic_data, write_identification
+
+    overrides = dict(parse_override(s) for s in args.set)
+    for key, value in (("h", args.h), ("t_end", args.t_end)):
+        if value is not None:
+            overrides[key] = value
+    names = [k.strip() for k in args.params.split(",") if k.strip()]
+    true, initial = _assignments(args.true), _assignments(args.initial)
+    for label, values in (("--true", true), ("--initial", initial)):
+        extra = [k for k in values if k not in names]
+        if extra:
+            raise ConfigError(f"{label} sets {extra[0]!r}, which is not in --params ({', '.join(names)})")
+    if args.every < 1:
+        raise ConfigError(f"--every must be an integer >= 1, got {args.every}")
+    if not 0.0 <= args.noise < 1.0:
+        raise ConfigError(f"--noise must be in [0, 1) (a fraction of the RMS), got {args.noise}")
+    scene = load_scene(args.scene, {**overrides, **true})  # validates before anything runs
+    load_scene(args.scene, {**overrides, **initial})
+    out = args.out or Path("nsga_out") / f"{scene.name}_identify"
+    if args.synthetic:
+        observables = args.observables.split(",") if args.observables else [scene.spec.observables[0]]
+        true = {k: scene.parameters[k] for k in names}
+        print(f"synthetic data: {scene.name} with {true}, noise {args.noise:g}", file=sys.stderr)
+        data = synthetic_data(args.scene, {**overrides, **true}, observables, noise=args.noise,
+                              seed=args.seed, every=args.every)
+        out.mkdir(parents=True, exist_ok=True)
+        data.save(out / "data.csv")
+    else:
+        if args.observables or args.noise or args.every != 1 or args.t_end is not None:
+            raise ConfigError("--observables, --noise, --every and --t-end apply to --synthetic only "
+                              "(with --data the file's columns and times are used)")
+        data = Data.load(args.data)
+        true = None
+    print(f"identifying {', '.join(names)} with {args.optimizer} ...", file=sys.stderr)
+    result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
+                      progress=True,
+                      max_steps=args.max_steps, learning_rate=args.learning_rate, true=true)
+    paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}")
+    for k in names:
+        line = f"{k}: initial {result.initial[k]:.6g} -> recovered {result.recovered[k]:.6g}"
+        if true is not None:
+            line += f" (true {true[k]:.6g}, relative error {result.summary()['relative_error'][k]:.2e})"
+        print(line)
+    print(f"{result.iterations} iterations, loss {result.losses[0]:.3e} -> {result.losses[-1]:.3e}, "
+          f"{result.wall_time_s:.2f} s (compile {result.compile_time_s:.1f} s)")
+    print("wrote " + ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
 def _scenes() -> int:
     for name, spec in sorted(REGISTRY.items()):
         print(f"{name}: {spec.description}")
@@ -147,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args)
         if args.command == "convergence":
             return _convergence(args)
+        if args.command == "identify":
+            return _identify(args)
         if args.command == "scenes":
             return _scenes()
         if args.command == "config":

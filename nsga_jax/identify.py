@@ -1,0 +1,340 @@
+"""Parameter identification: fit scene parameters to measured motion by gradient
+descent through simulations with impacts (optax).
+
+The loss is the mean squared mismatch between the scene's observables and the
+data, each observable normalised by the mean square of its data; it is
+differentiated through the whole trajectory (:func:`~nsga_jax.trajectory`).
+The optimiser works on the parameters divided by their starting values (all
+of order one) and keeps them inside their allowed ranges.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .results import ConfigError
+from .scenes.base import load_scene, make_scheme, parametrize
+from .trajectory import trajectory
+
+OPTIMIZERS = ("lbfgs", "adam")
+
+
+@dataclass
+class Data:
+    """Measured observables: ``t`` (m,) [s] and ``values[name]`` (m,)."""
+
+    t: np.ndarray
+    values: dict[str, np.ndarray]
+
+    @classmethod
+    def load(cls, path) -> "Data":
+        """From an ``.npz`` file (an array ``t`` and one array per observable) or
+        a ``.csv`` file (a header line ``t,name,...`` and one row per time)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"data file {str(path)!r} does not exist")
+        if path.suffix == ".csv":
+            table = np.genfromtxt(path, delimiter=",", names=True)
+            columns = {k: np.atleast_1d(table[k]) for k in table.dtype.names}
+        elif path.suffix == ".npz":
+            with np.load(path) as f:
+                columns = {k: np.asarray(f[k], float) for k in f.files}
+        else:
+            raise ConfigError(f"data file {str(path)!r}: expected a .npz or .csv file")
+        if "t" not in columns:
+            raise ConfigError(f"{path}: the data file needs a column 't' (times [s])")
+        data = cls(t=columns.pop("t"), values=columns)
+        data.check()
+        return data
+
+    def check(self) -> None:
+        """Equal lengths, finite values, times >= 0 and increasing."""
+        if not self.values:
+            raise ConfigError("the data has no observable besides 't'")
+        for k, v in {"t": self.t, **self.values}.items():
+            if v.shape != self.t.shape or v.ndim != 1:
+                raise ConfigError(f"data column {k!r} has shape {v.shape}; expected ({self.t.size},) like 't'")
+            if not np.all(np.isfinite(v)):
+                raise ConfigError(f"data column {k!r} has non-finite values")
+        if self.t[0] < 0 or np.any(np.diff(self.t) <= 0):
+            raise ConfigError("data times 't' must be >= 0 and strictly increasing")
+
+    def save(self, path) -> Path:
+        """As ``.csv`` (header ``t,name,...``) or ``.npz``, by the suffix of ``path``."""
+        path = Path(path)
+        if path.suffix == ".csv":
+            names = ["t", *self.values]
+            table = np.column_stack([self.t, *self.values.values()])
+            np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        else:
+            np.savez(path, t=self.t, **self.values)
+        return path
+
+
+@dataclass
+class Identification:
+    """What :func:`identify` found, and how."""
+
+    names: list[str]
+    initial: dict[str, float]
+    recovered: dict[str, float]
+    true: dict[str, float] | None
+    losses: list[float]
+    iterations: int
+    evaluations: int
+    stop: str
+    wall_time_s: float
+    compile_time_s: float
+    fitted: dict[str, np.ndarray] = field(default_factory=dict)
+    initial_fit: dict[str, np.ndarray] = field(default_factory=dict)
+    gradient_norm: float = math.nan
+
+    def summary(self) -> dict[str, Any]:
+        out = {"parameters": self.names, "initial": self.initial, "recovered": self.recovered,
+               "iterations": self.iterations, "evaluations": self.evaluations,
+               "stopped_by": self.stop, "initial_loss": self.losses[0], "final_loss": self.losses[-1],
+               "gradient_norm": self.gradient_norm, "wall_time_s": self.wall_time_s,
+               "compile_time_s": self.compile_time_s}
+        if self.true is not None:
+            out["true"] = self.true
+            out["relative_error"] = {k: abs(self.recovered[k] / self.true[k] - 1.0) if self.true[k] else
+                                     abs(self.recovered[k]) for k in self.names}
+        return out
+
+
+def _run(build, scheme, h, n_steps, p):
+    model, q0, v0, observe = build(p)
+    return observe(trajectory(model, scheme, 0.0, h, n_steps, q0, v0))
+
+
+def synthetic_data(scene_name: str, overrides: dict | None, observables, noise: float = 0.0,
+                   seed: int = 0, every: int = 1) -> Data:
+    """Data from the scene's own model (its scheme and step), every ``every``-th
+    step, with Gaussian noise of standard deviation ``noise`` times each
+    observable's RMS."""
+    scene = load_scene(scene_name, overrides)
+    sol = scene.run()
+    rng = np.random.default_rng(seed)
+    values = {}
+    for k in observables:
+        y = np.asarray(sol.observables[k])[::every]
+        values[k] = y + noise * np.sqrt(np.mean(y**2)) * rng.normal(size=y.shape)
+    return Data(t=sol.ts[::every], values=values)
+
+
+def identify(
+    scene_name: str,
+    names: list[str],
+    data: Data,
+    overrides: dict | None = None,
+    initial: dict[str, float] | None = None,
+    optimizer: str = "lbfgs",
+    max_steps: int = 100,
+    learning_rate: float = 0.05,
+    gtol: float = 1e-9,
+    ftol: float = 1e-10,
+    true: dict[str, float] | None = None,
+    progress: bool = False,
+) -> Identification:
+    """Fit the parameters ``names`` of a scene to ``data``.
+
+    Args:
+        scene_name: built-in scene or TOML config; ``overrides`` set the other
+            parameters and the solver (scheme, h); the run covers the data's times.
+        names: float parameters to identify.
+        data: measured observables (names of the scene's observables).
+        initial: starting values (default: the scene's values).
+        optimizer: ``"lbfgs"`` (optax's L-BFGS direction with a backtracking
+            Armijo line search) or ``"adam"`` (optax Adam, ``learning_rate`` in
+            scaled variables).
+        max_steps, gtol, ftol: stop after max_steps iterations, when the
+            gradient norm (in scaled variables) falls below gtol, or when an
+            iteration lowers the loss by less than ftol times its value.
+        true: the true values, when known (synthetic data), for the report.
+        progress: print the loss and the parameters after each iteration (stderr).
+
+    One function is compiled: the loss, its gradient (through the whole
+    trajectory) and the predicted observables, together; every evaluation,
+    line-search trials included, reuses it.
+    """
+    if optimizer not in OPTIMIZERS:
+        raise ConfigError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got {optimizer!r}")
+    if max_steps < 1:
+        raise ConfigError(f"max_steps must be an integer >= 1, got {max_steps}")
+    data.check()
+    overrides = dict(overrides or {})
+    start = {**overrides, **(initial or {})}
+    scene = load_scene(scene_name, start)
+    unknown = [k for k in data.values if k not in scene.spec.observables]
+    if unknown:
+        raise ConfigError(f"data has unknown observable {unknown[0]!r}; {scene.name} has "
+                          f"{', '.join(scene.spec.observables)}")
+    h = scene.solver["h"]
+    n_steps = max(1, int(math.ceil(float(np.max(data.t)) / h - 1e-9)))
+    params0, build = parametrize(scene_name, start, names)
+    specs = scene.spec.parameters
+    # Scaled variables u = p / scale, of order one.
+    scale = {k: float(params0[k]) if float(params0[k]) != 0.0 else 1.0 for k in names}
+    bounds = {k: _scaled_bounds(specs[k], scale[k]) for k in names}
+    scheme = make_scheme(scene.solver)
+    t_data = jnp.asarray(data.t)
+    ts = jnp.arange(n_steps + 1) * h
+    targets = {k: jnp.asarray(v) for k, v in data.values.items()}
+    weights = {k: 1.0 / max(float(np.mean(v**2)), 1e-300) for k, v in data.values.items()}
+
+    def loss_and_prediction(u):
+        obs = _run(build, scheme, h, n_steps, {k: u[k] * scale[k] for k in names})
+        pred = {k: jnp.interp(t_data, ts, obs[k]) for k in targets}
+        loss = sum(weights[k] * jnp.mean((pred[k] - targets[k]) ** 2) for k in targets)
+        return loss, pred
+
+    def advance(u, step, alpha):
+        """``u + alpha * step``, kept inside the parameters' ranges."""
+        return {k: jnp.clip(u[k] + alpha * step[k], *bounds[k]) for k in names}
+
+    u0 = {k: jnp.asarray(float(params0[k]) / scale[k]) for k in names}
+    tc = time.perf_counter()
+    evaluate = jax.jit(jax.value_and_grad(loss_and_prediction, has_aux=True)).lower(u0).compile()
+    opt = optax.lbfgs(linesearch=None) if optimizer == "lbfgs" else optax.adam(learning_rate)
+    state = opt.init(u0)
+    direction = jax.jit(opt.update).lower(u0, state, u0).compile()
+    advance = jax.jit(advance).lower(u0, u0, 1.0).compile()
+    compile_time = time.perf_counter() - tc
+
+    t0 = time.perf_counter()
+    u = u0
+    (value, pred), grad = evaluate(u)
+    initial_fit = pred
+    losses, evaluations, stop = [float(value)], 1, "max_steps"
+    it = 0
+    while it < max_steps:
+        if not math.isfinite(losses[-1]):
+            raise ConfigError(f"the loss is not finite at {to_values(u, scale)}; start closer to the data")
+        if float(optax.tree.norm(grad)) < gtol:
+            stop = "gradient"
+            break
+        it += 1
+        step, state = direction(grad, state, u)
+        if optimizer == "adam":
+            u = advance(u, step, 1.0)
+            (value, pred), grad = evaluate(u)
+            evaluations += 1
+        else:
+            accepted, n = _line_search(evaluate, advance, u, losses[-1], grad, step)
+            if accepted is None:  # restart L-BFGS from the (normalised) gradient direction
+                state = jax.tree.map(jnp.asarray, opt.init(u))
+                step, state = direction(grad, state, u)
+                accepted, m = _line_search(evaluate, advance, u, losses[-1], grad, step)
+                n += m
+            evaluations += n
+            if accepted is None:
+                stop = "line search"
+                break
+            u, value, pred, grad = accepted
+        losses.append(float(value))
+        stalled = optimizer == "lbfgs" and losses[-2] - losses[-1] <= ftol * abs(losses[-2])
+        if progress:
+            values = ", ".join(f"{k} = {v:.6g}" for k, v in to_values(u, scale).items())
+            print(f"  iteration {it}: loss {losses[-1]:.6e}, {values} ({evaluations} evaluations)",
+                  file=sys.stderr, flush=True)
+        if stalled:
+            stop = "loss"
+            break
+    wall = time.perf_counter() - t0
+    return Identification(
+        names=list(names), initial=to_values(u0, scale), recovered=to_values(u, scale),
+        true=None if true is None else {k: float(true[k]) for k in names}, losses=losses, iterations=it,
+        evaluations=evaluations, stop=stop, wall_time_s=wall, compile_time_s=compile_time,
+        fitted={k: np.asarray(v) for k, v in pred.items()},
+        initial_fit={k: np.asarray(v) for k, v in initial_fit.items()},
+        gradient_norm=float(optax.tree.norm(grad)),
+    )
+
+
+def _line_search(evaluate, advance, u, value, grad, step, trials: int = 30, c1: float = 1e-4):
+    """Backtracking from the full step: the first trial with sufficient decrease
+    (Armijo), else the trial with the lowest loss if it is below ``value``
+    (the loss is piecewise smooth through impacts: a jump can hide the
+    decrease that the gradient promises); ``None`` when no trial decreases.
+    Returns ``((u, value, prediction, gradient) or None, evaluations)``."""
+    slope = float(optax.tree.vdot(grad, step))
+    if not slope < 0.0:  # not a descent direction: steepest descent, same length
+        scale = float(optax.tree.norm(step)) / max(float(optax.tree.norm(grad)), 1e-300)
+        step = jax.tree.map(lambda g: -scale * g, grad)
+        slope = -scale * float(optax.tree.vdot(grad, grad))
+    best = None
+    for trial in range(trials):
+        alpha = 0.5**trial
+        candidate = advance(u, step, alpha)
+        (c_value, c_pred), c_grad = evaluate(candidate)
+        c_value = float(c_value)
+        if not math.isfinite(c_value):
+            continue
+        if c_value <= value + c1 * alpha * slope:
+            return (candidate, c_value, c_pred, c_grad), trial + 1
+        if c_value < value and (best is None or c_value < best[1]):
+            best = (candidate, c_value, c_pred, c_grad)
+    return best, trials
+
+
+def _scaled_bounds(spec, scale: float) -> tuple[float, float]:
+    """A parameter's range in scaled variables; open bounds are kept 1e-6 inside."""
+    lo = spec.lo + (1e-6 * abs(scale) if spec.lo_open else 0.0)
+    hi = spec.hi - (1e-6 * abs(scale) if spec.hi_open else 0.0)
+    return tuple(sorted((lo / scale, hi / scale)))
+
+
+def to_values(u, scale) -> dict[str, float]:
+    """Scaled variables back to parameter values."""
+    return {k: float(u[k]) * scale[k] for k in u}
+
+
+def write_identification(result: Identification, data: Data, out_dir, title: str = "") -> dict[str, Path]:
+    """Write ``identification.json``, ``loss.png`` (loss per iteration) and
+    ``fit.png`` (data, initial and fitted observables); returns the paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out / "identification.json", "loss": out / "loss.png", "fit": out / "fit.png"}
+    paths["json"].write_text(json.dumps(result.summary(), indent=2) + "\n")
+
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    ax.semilogy(np.arange(len(result.losses)), np.maximum(result.losses, 1e-300), "o-", ms=3)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("loss (normalised mean square)")
+    ax.set_title(title or "identification")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(paths["loss"], dpi=120)
+    plt.close(fig)
+
+    names = list(data.values)
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, 2.6 * len(names)), sharex=True, squeeze=False)
+    for ax, k in zip(axes[:, 0], names):
+        ax.plot(data.t, data.values[k], ".", ms=3, color="0.5", label="data")
+        ax.plot(data.t, result.initial_fit[k], "--", lw=1, label="initial")
+        ax.plot(data.t, result.fitted[k], "-", lw=1.2, label="fitted")
+        ax.set_ylabel(k)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(loc="best", fontsize=8)
+    axes[0, 0].set_title(title or "fit")
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(paths["fit"], dpi=120)
+    plt.close(fig)
+    return paths
