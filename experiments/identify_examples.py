@@ -68,7 +68,8 @@ def run_case(name: str, out: Path) -> dict:
     summary = result.summary()
     summary.update(
         scene=scene, observables=observables, samples=int(data.t.size), noise=NOISE, overrides=overrides,
-        initial=initial, recovered={k: current[k] for k in true}, relative_error={k: abs(current[k] / true[k] - 1.0) for k in true}, stages=stage_summaries,
+        initial=initial, recovered={k: current[k] for k in true},
+        relative_error={k: abs(current[k] / true[k] - 1.0) for k in true}, stages=stage_summaries,
         iterations=sum(s["iterations"] for s in stage_summaries),
         wall_time_s=sum(s["wall_time_s"] for s in stage_summaries),
         compile_time_s=sum(s["compile_time_s"] for s in stage_summaries), elapsed_s=time.perf_counter() - t)
