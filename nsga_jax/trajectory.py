@@ -9,10 +9,17 @@ model, the scheme's settings and the initial state: ``jit``, ``vmap``,
   theorem at the converged solution, active set frozen), never by unrolling
   its iterations: :func:`nsga_jax.integrators.newton.solve`.
 - The step loop is a ``lax.scan`` over chunks of steps with ``jax.checkpoint``
-  on each chunk and on each step: reverse mode stores one state per chunk and
-  recomputes a chunk during the backward pass, so its memory grows like
-  N/c + c states (c = ``checkpoint_every``, √N by default) plus what the loop
-  outputs. Pass ``observe`` to output only what a loss needs.
+  on each chunk: reverse mode stores one state per chunk and recomputes a
+  chunk during the backward pass, keeping that chunk's per-step residuals,
+  so its memory grows like N/c states plus c steps' residuals (c =
+  ``checkpoint_every``, √N by default) plus what the loop outputs. Pass
+  ``observe`` to output only what a loss needs.
+- A step's residuals are vectors when the iteration matrices are constant
+  (linear models), but include dense factorisations (3 n² numbers) when they
+  are refactored each step; for those, when c steps of them would exceed
+  256 MiB, each step is checkpointed too (recomputed once more in the
+  backward pass: 1.7× the gradient's time on the cube, for memory that no longer
+  grows with c). ``checkpoint_steps`` overrides the choice.
 """
 
 from __future__ import annotations
@@ -31,6 +38,8 @@ from ._custom_types import Scalar
 from .integrators.base import AbstractScheme, StepOutput, StepState
 from .models.base import Model
 from .results import Result
+
+STEP_RESIDUALS_BYTES = 2**28  # per chunk: above this, each step is checkpointed as well
 
 
 class Trajectory(eqx.Module):
@@ -77,6 +86,7 @@ def trajectory(
     checkpoint_every: int | None = None,
     observe: Callable[[StepState, StepOutput], Any] | None = None,
     throw: bool = True,
+    checkpoint_steps: bool | None = None,
 ) -> Trajectory:
     """Integrate ``n_steps`` steps of size ``h`` from (t0, q0, v0), differentiably.
 
@@ -93,6 +103,9 @@ def trajectory(
         throw: raise at run time (``eqx.error_if``) if any step fails; with
             ``False`` failures are only in ``records.result`` (full records) or
             nowhere (``observe``).
+        checkpoint_steps: checkpoint each step inside a chunk as well (see
+            above; default: only where a chunk's dense residuals would pass
+            256 MiB).
 
     Returns:
         A :class:`Trajectory`.
@@ -112,12 +125,18 @@ def trajectory(
     c = checkpoint_every or max(1, math.ceil(math.sqrt(n_steps)))
     n_chunks = -(-n_steps // c)
 
-    @jax.checkpoint
+    if checkpoint_steps is None:
+        refactors = not (model.constant_mass and model.linear_force)
+        checkpoint_steps = refactors and c * 3 * model.n_dof**2 * dtype.itemsize > STEP_RESIDUALS_BYTES
+
     def one_step(state, k):
         new, out = scheme.step(model, ops, state, h)
         state = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new, state)
         kept = out if observe is None else (observe(new, out), out.result)
         return state, kept
+
+    if checkpoint_steps:
+        one_step = jax.checkpoint(one_step)
 
     @jax.checkpoint
     def chunk(state, ks):

@@ -115,3 +115,19 @@ def test_coupled_scheme_refuses_differentiation():
     model, q0, v0, _ = parametrize("bouncing_ball")[1](parametrize("bouncing_ball")[0])
     with pytest.raises(nsga_jax.ConfigError, match="CS is not differentiable"):
         nsga_jax.trajectory(model, nsga_jax.CS(), 0.0, 1e-3, 10, q0, v0)
+
+
+def test_checkpointing_choices_give_the_same_gradient():
+    params, build = parametrize("bouncing_ball", {"h": 1e-3}, ["e", "height"])
+
+    def loss(p, every, steps):
+        model, q0, v0, observe = build(p)
+        traj = nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, 1e-3, 900, q0, v0, checkpoint_every=every,
+                                   checkpoint_steps=steps)
+        return jnp.mean(observe(traj)["z"] ** 2)
+
+    grads = [jax.jit(jax.grad(lambda p, e=e, s=s: loss(p, e, s)))(params)
+             for e, s in ((None, False), (7, True))]
+    for g in grads[1:]:
+        for k in params:
+            np.testing.assert_allclose(float(g[k]), float(grads[0][k]), rtol=1e-12, err_msg=k)
