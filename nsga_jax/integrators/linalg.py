@@ -41,12 +41,21 @@ def dense_solve(matrix: jax.Array) -> Solve:
     return lambda rhs: jnp.linalg.solve(matrix, rhs)
 
 
+REDUNDANCY_SHIFT = 1e-12
+"""Relative diagonal shift of a Delassus block: redundant active constraints
+(four coplanar contacts on a rigid body) make it singular; the shift picks
+the smallest multipliers (shared equally) and changes a regular solve by
+about 1e-12 relative, which the Newton iteration corrects."""
+
+
 def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
     """Solve ``D[a, a] x[a] = rhs[a]``; x is zero on inactive rows."""
     if D.shape[0] == 1:  # one constraint: a division (an LU call costs more here)
         return jnp.where(active, rhs / jnp.where(active, D[0], 1.0), 0.0)
     both = active[:, None] & active[None, :]
-    Dm = jnp.where(both, D, jnp.eye(D.shape[0], dtype=D.dtype))
+    eye = jnp.eye(D.shape[0], dtype=D.dtype)
+    shift = REDUNDANCY_SHIFT * jnp.max(jnp.abs(jnp.diagonal(D)))
+    Dm = jnp.where(both, D + shift * eye, eye)
     return jnp.where(active, jnp.linalg.solve(Dm, jnp.where(active, rhs, 0.0)), 0.0)
 
 
