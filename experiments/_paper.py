@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import shutil
 import time
@@ -12,6 +13,15 @@ import numpy as np
 from nsga_jax.studies import make_reference, slopes, study, write_study
 
 FIGURES = Path("docs/figures")
+
+
+def output_dir(script_doc: str, name: str) -> Path:
+    """Parse ``--out`` (default experiments/out/<name>) and create the folder."""
+    parser = argparse.ArgumentParser(description=script_doc)
+    parser.add_argument("--out", type=Path, default=Path("experiments/out") / name)
+    out = parser.parse_args().out
+    out.mkdir(parents=True, exist_ok=True)
+    return out
 
 
 def run_study(name: str, schemes, hs, ref_h: float, ref_scheme: str, overrides: dict, out: Path,

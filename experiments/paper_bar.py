@@ -5,7 +5,6 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 from pathlib import Path
 
@@ -16,7 +15,7 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from _paper import FIGURES, finish, run_study  # noqa: E402
+from _paper import FIGURES, finish, output_dir, run_study  # noqa: E402
 
 from nsga_jax.scenes import load_scene  # noqa: E402
 
@@ -60,13 +59,10 @@ def figure6(out: Path):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--out", type=Path, default=Path("experiments/out/paper_bar"))
-    args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
-    rows, reference, elapsed = run_study("impacting_bar", ["ds", "dsn", "cs", "mj"], HS, 1e-5, "cs", {}, args.out,
+    out = output_dir(__doc__, "paper_bar")
+    rows, reference, elapsed = run_study("impacting_bar", ["ds", "dsn", "cs", "mj"], HS, 1e-5, "cs", {}, out,
                                          max_iter_cs=200)
-    ref, runs = figure6(args.out)
+    ref, runs = figure6(out)
     by = {(r.scheme, r.h): r for r in rows}
     ds_one = all(by[("ds", h)].iterations[s]["max"] <= 1 for h in HS for s in ("smooth", "position", "velocity"))
     dsn_one = all(by[("dsn", h)].iterations[s]["max"] <= 1 for h in HS for s in ("smooth", "position", "velocity"))
@@ -93,7 +89,7 @@ def main() -> None:
          f"max overlap {pen[('dsn', 0.03)]:.3f} m (DS {pen[('ds', 0.03)]:.3f} m)",
          pen[("dsn", 0.03)] > 0 >= pen[("ds", 0.03)]),
     ]
-    finish("impacting_bar", rows, reference, elapsed, claims, args.out, "python experiments/paper_bar.py")
+    finish("impacting_bar", rows, reference, elapsed, claims, out, "python experiments/paper_bar.py")
 
 
 if __name__ == "__main__":

@@ -5,13 +5,11 @@
 
 from __future__ import annotations
 
-import argparse
 import os
-from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from _paper import finish, run_study  # noqa: E402
+from _paper import finish, output_dir, run_study  # noqa: E402
 
 from nsga_jax.studies import slopes  # noqa: E402
 
@@ -19,15 +17,13 @@ HS = [1e-4, 3e-4, 1e-3, 3e-3, 1e-2]
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--out", type=Path, default=Path("experiments/out/paper_box"))
-    args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
-    rows, reference, elapsed = run_study("rigid_box", ["ds", "cs", "dsn", "mj"], HS, 1e-5, "cs", {}, args.out,
+    out = output_dir(__doc__, "paper_box")
+    rows, reference, elapsed = run_study("rigid_box", ["ds", "cs", "dsn", "mj"], HS, 1e-5, "cs", {}, out,
                                          max_iter_cs=200)
     by = {(r.scheme, r.h): r for r in rows}
     ok = [h for h in HS if not by[("ds", h)].failed_steps and not by[("cs", h)].failed_steps]
     ratio = [by[("ds", h)].errors["gap_5"] / by[("cs", h)].errors["gap_5"] for h in ok]
+
     def solves(scheme, h, stat):
         return by[(scheme, h)].iterations["linear_solves"][stat]
 
@@ -42,13 +38,11 @@ def main() -> None:
          "error ratio DS/CS of gap_5: " + ", ".join(f"{h:g}: {r:.2f}" for h, r in zip(ok, ratio)),
          all(0.5 < r < 2.0 for r in ratio)),
         ("DS needs fewer iterations (average)", "mean solves/step DS vs CS: " + ", ".join(
-            f"{h:g}: {by[('ds', h)].iterations['linear_solves']['mean']:.1f} vs "
-            f"{by[('cs', h)].iterations['linear_solves']['mean']:.1f}" for h in HS), fewer_mean),
+            f"{h:g}: {solves('ds', h, 'mean'):.1f} vs {solves('cs', h, 'mean'):.1f}" for h in HS), fewer_mean),
         ("DS needs fewer iterations (maximum)", "max solves/step DS vs CS: " + ", ".join(
-            f"{h:g}: {by[('ds', h)].iterations['linear_solves']['max']} vs "
-            f"{by[('cs', h)].iterations['linear_solves']['max']}" for h in HS), fewer_max),
+            f"{h:g}: {solves('ds', h, 'max')} vs {solves('cs', h, 'max')}" for h in HS), fewer_max),
     ]
-    finish("rigid_box", rows, reference, elapsed, claims, args.out, "python experiments/paper_box.py")
+    finish("rigid_box", rows, reference, elapsed, claims, out, "python experiments/paper_box.py")
 
 
 if __name__ == "__main__":

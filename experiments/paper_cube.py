@@ -14,13 +14,11 @@ above it, x8, as well.
 
 from __future__ import annotations
 
-import argparse
 import os
-from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from _paper import finish, run_study  # noqa: E402
+from _paper import finish, output_dir, run_study  # noqa: E402
 
 from nsga_jax.studies import slopes  # noqa: E402
 
@@ -29,12 +27,9 @@ WINDOW = {"height": 0.0505, "velocity": -2.43, "t_end": 0.02}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--out", type=Path, default=Path("experiments/out/paper_cube"))
-    args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(__doc__, "paper_cube")
     rows, reference, elapsed = run_study("flexible_cube", ["ds", "cs", "dsn", "mj"], HS, 2.5e-6, "ds", WINDOW,
-                                         args.out, max_iter_cs=100, observables=("x8_uz", "x8_vz", "x1_uz"))
+                                         out, max_iter_cs=100, observables=("x8_uz", "x8_vz", "x1_uz"))
     by = {(r.scheme, r.h): r for r in rows}
     order = slopes(rows)
     cs_ok = [h for h in HS if not by[("cs", h)].failed_steps]
@@ -48,7 +43,7 @@ def main() -> None:
          f"CS converged at h = {', '.join(f'{h:g}' for h in cs_ok) or 'none'}",
          all(h <= 3e-5 for h in cs_ok) and 1e-5 in cs_ok),
     ]
-    finish("flexible_cube", rows, reference, elapsed, claims, args.out, "python experiments/paper_cube.py")
+    finish("flexible_cube", rows, reference, elapsed, claims, out, "python experiments/paper_cube.py")
 
 
 if __name__ == "__main__":

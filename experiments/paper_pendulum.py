@@ -5,13 +5,11 @@
 
 from __future__ import annotations
 
-import argparse
 import os
-from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from _paper import finish, run_study  # noqa: E402
+from _paper import finish, output_dir, run_study  # noqa: E402
 
 from nsga_jax.metrics import observed_order  # noqa: E402
 
@@ -19,12 +17,9 @@ HS = [1e-5, 3e-5, 1e-4, 3e-4, 1e-3]
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--out", type=Path, default=Path("experiments/out/paper_pendulum"))
-    args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(__doc__, "paper_pendulum")
     rows, reference, elapsed = run_study("flexible_pendulum", ["ds", "cs", "dsn", "mj"], HS, 1e-6, "ds", {},
-                                         args.out, max_iter_cs=200)
+                                         out, max_iter_cs=200)
     by = {(r.scheme, r.h): r for r in rows}
     cs_fail = [h for h in HS if by[("cs", h)].failed_steps]
     ds_fail = [h for h in HS if by[("ds", h)].failed_steps]
@@ -44,7 +39,7 @@ def main() -> None:
          f"DS failures: {', '.join(f'{h:g}' for h in ds_fail) or 'none'}; at most {ds_max} solves per step",
          not ds_fail and ds_max <= 10),
     ]
-    finish("flexible_pendulum", rows, reference, elapsed, claims, args.out, "python experiments/paper_pendulum.py")
+    finish("flexible_pendulum", rows, reference, elapsed, claims, out, "python experiments/paper_pendulum.py")
 
 
 if __name__ == "__main__":
