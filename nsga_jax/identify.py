@@ -220,7 +220,7 @@ def identify(
     it = 0
     while it < max_steps:
         if not math.isfinite(losses[-1]):
-            raise ConfigError(f"the loss is not finite at {to_values(u, scale)}; start closer to the data")
+            raise ConfigError(f"the loss is not finite at {_to_values(u, scale)}; start closer to the data")
         if float(optax.tree.norm(grad)) < gtol:
             stop = "gradient"
             break
@@ -245,7 +245,7 @@ def identify(
         losses.append(float(value))
         stalled = optimizer == "lbfgs" and losses[-2] - losses[-1] <= ftol * abs(losses[-2])
         if progress:
-            values = ", ".join(f"{k} = {v:.6g}" for k, v in to_values(u, scale).items())
+            values = ", ".join(f"{k} = {v:.6g}" for k, v in _to_values(u, scale).items())
             print(f"  iteration {it}: loss {losses[-1]:.6e}, {values} ({evaluations} evaluations)",
                   file=sys.stderr, flush=True)
         if stalled:
@@ -253,7 +253,7 @@ def identify(
             break
     wall = time.perf_counter() - t0
     return Identification(
-        names=list(names), initial=to_values(u0, scale), recovered=to_values(u, scale),
+        names=list(names), initial=_to_values(u0, scale), recovered=_to_values(u, scale),
         true=None if true is None else {k: float(true[k]) for k in names}, losses=losses, iterations=it,
         evaluations=evaluations, stop=stop, wall_time_s=wall, compile_time_s=compile_time,
         fitted={k: np.asarray(v) for k, v in pred.items()},
@@ -295,7 +295,7 @@ def _scaled_bounds(spec, scale: float) -> tuple[float, float]:
     return tuple(sorted((lo / scale, hi / scale)))
 
 
-def to_values(u, scale) -> dict[str, float]:
+def _to_values(u, scale) -> dict[str, float]:
     """Scaled variables back to parameter values."""
     return {k: float(u[k]) * scale[k] for k in u}
 

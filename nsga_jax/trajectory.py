@@ -129,9 +129,11 @@ def trajectory(
         refactors = not (model.constant_mass and model.linear_force)
         checkpoint_steps = refactors and c * 3 * model.n_dof**2 * dtype.itemsize > STEP_RESIDUALS_BYTES
 
+    padded = n_chunks * c != n_steps  # the last chunk runs past n_steps: mask those steps
+
     def one_step(state, k):
         new, out = scheme.step(model, ops, state, h)
-        state = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new, state)
+        state = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new, state) if padded else new
         kept = out if observe is None else (observe(new, out), out.result)
         return state, kept
 

@@ -43,9 +43,10 @@ def dense_solve(matrix: jax.Array) -> Solve:
 
 REDUNDANCY_SHIFT = 1e-12
 """Relative diagonal shift of a Delassus block: redundant active constraints
-(four coplanar contacts on a rigid body) make it singular; the shift picks
-the smallest multipliers (shared equally) and changes a regular solve by
-about 1e-12 relative, which the Newton iteration corrects."""
+(four coplanar contacts on a rigid body) make it singular, and the shift
+keeps the solve finite; it changes a regular solve by about 1e-12 relative,
+which the Newton iteration corrects. (Multipliers of redundant constraints
+stay non-unique: which ones carry the impulse depends on the active set.)"""
 
 
 def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
