@@ -2,9 +2,11 @@
 
 The whole trajectory runs in compiled ``lax.scan`` calls over chunks of steps
 (one compilation, reused for every chunk); no Python runs inside a chunk. After
-each chunk the host collects the chunk's records, reports progress, hands the
+each chunk the host adds the chunk to the run's statistics, keeps its records
+(every ``record_every``-th step of them), reports progress, hands the full
 chunk to an optional callback (the CLI writes it to disk at once), and stops
-early on a failure when ``throw=True``.
+early on a failure when ``throw=True``. With ``record_every > 1`` the memory a
+run holds is one chunk plus the kept records: flat for any number of steps.
 
 Compile time is measured apart (``lower().compile()``); ``wall_time`` is the
 execution time of the constant-operator preparation, the initialisation and
@@ -14,6 +16,8 @@ counted).
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import math
 import sys
 import time
@@ -40,8 +44,10 @@ class Solution:
     """A trajectory and what the scheme did to get it (NumPy arrays, host side).
 
     Every per-time array has a leading axis of length N + 1 (the initial state
-    first). Record fields (``impulse``, ``nu``, ``lam``, ``iterations``,
-    ``result``...) are zero at index 0.
+    first), or, with ``record_every = k > 1``, one entry per k steps plus the
+    initial and the last step. Record fields (``impulse``, ``nu``, ``lam``,
+    ``iterations``, ``result``...) are zero at index 0. ``stats`` and
+    ``failed_steps`` always cover every step.
 
     Attributes:
         ts: times [s], (N+1,).
@@ -51,6 +57,8 @@ class Solution:
         h: step size [s]; n_steps: steps actually taken (fewer than requested
             when a failure stopped the run).
         result: the first failure's :class:`Result` (``successful`` if none).
+        totals: statistics over every step (accumulated while running; computed
+            from ``records`` when not given).
         stats: iteration statistics, failures, constraint violations, timings.
     """
 
@@ -65,6 +73,12 @@ class Solution:
     wall_time: float
     compile_time: float
     observables: dict[str, np.ndarray] = field(default_factory=dict)
+    totals: RunTotals | None = None
+
+    def __post_init__(self):
+        if self.totals is None:
+            self.totals = RunTotals()
+            self.totals.add(jax.tree_util.tree_map(lambda x: np.asarray(x)[1:], self.records), first_step=1)
 
     @property
     def iterations(self) -> np.ndarray:
@@ -73,8 +87,9 @@ class Solution:
 
     @property
     def failed_steps(self) -> np.ndarray:
-        """Indices (into ts) of the steps whose result is not successful."""
-        return np.nonzero(np.asarray(self.records.result) != Result.successful)[0]
+        """Step numbers k (t = t0 + k h) of the steps whose result is not
+        successful; indices into ``ts`` when every step is recorded."""
+        return np.asarray(self.totals.failed, dtype=int)
 
     @property
     def impulse(self) -> np.ndarray:
@@ -88,8 +103,8 @@ class Solution:
 
     @property
     def stats(self) -> dict:
-        it = self.iterations[1:]
-        gap = self.gap
+        tot = self.totals
+        n = max(tot.n_steps, 1)
         stats = {
             "n_steps": int(self.n_steps),
             "h": float(self.h),
@@ -97,19 +112,55 @@ class Solution:
             "compile_time_s": float(self.compile_time),
             "us_per_step": 1e6 * float(self.wall_time) / max(int(self.n_steps), 1),
             "iterations": {
-                name: {"mean": float(it[:, i].mean()) if len(it) else 0.0,
-                       "max": int(it[:, i].max()) if len(it) else 0}
+                name: {"mean": float(tot.iterations_sum[i] / n), "max": int(tot.iterations_max[i])}
                 for i, name in enumerate(("smooth", "position", "velocity"))
             },
-            "failed_steps": int(len(self.failed_steps)),
+            "failed_steps": len(tot.failed),
             "result": self.result.name,
-            "max_penetration": float(max(0.0, -gap.min())) if gap.size else 0.0,
-            "max_bilateral_violation_position": _absmax(self.records.bilateral),
-            "max_bilateral_violation_velocity": _absmax(self.records.bilateral_rate),
+            "max_penetration": float(max(0.0, -tot.min_gap)),
+            "max_bilateral_violation_position": float(tot.max_bilateral),
+            "max_bilateral_violation_velocity": float(tot.max_bilateral_rate),
         }
-        total = it.sum(axis=1) if len(it) else np.zeros(1)
-        stats["iterations"]["linear_solves"] = {"mean": float(total.mean()), "max": int(total.max())}
+        stats["iterations"]["linear_solves"] = {"mean": float(tot.solves_sum / n), "max": int(tot.solves_max)}
         return stats
+
+
+@dataclass
+class RunTotals:
+    """Statistics over every step of a run, added chunk by chunk, so that they
+    cover the steps a strided record leaves out: Newton iterations (sum and max
+    per sub-problem, and of their total, the linear solves per step), failed
+    step numbers, the smallest gap [m] and the largest bilateral violations
+    (position [m], velocity [m/s])."""
+
+    n_steps: int = 0
+    iterations_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    iterations_max: np.ndarray = field(default_factory=lambda: np.zeros(3, int))
+    solves_sum: float = 0.0
+    solves_max: int = 0
+    failed: list[int] = field(default_factory=list)
+    min_gap: float = math.inf
+    max_bilateral: float = 0.0
+    max_bilateral_rate: float = 0.0
+
+    def add(self, records: StepOutput, first_step: int) -> None:
+        """Add consecutive steps ``first_step, first_step + 1, ...`` (NumPy records)."""
+        it = np.asarray(records.iterations)
+        if not len(it):
+            return
+        self.n_steps += len(it)
+        self.iterations_sum += it.sum(axis=0)
+        self.iterations_max = np.maximum(self.iterations_max, it.max(axis=0))
+        solves = it.sum(axis=1)
+        self.solves_sum += float(solves.sum())
+        self.solves_max = max(self.solves_max, int(solves.max()))
+        bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
+        self.failed.extend((first_step + bad).tolist())
+        gap = np.asarray(records.gap)
+        if gap.size:
+            self.min_gap = min(self.min_gap, float(gap.min()))
+        self.max_bilateral = max(self.max_bilateral, _absmax(records.bilateral))
+        self.max_bilateral_rate = max(self.max_bilateral_rate, _absmax(records.bilateral_rate))
 
 
 def _absmax(x) -> float:
@@ -142,6 +193,23 @@ def validate_scheme(scheme: AbstractScheme) -> None:
         x = float(value)
         if not (math.isfinite(x) and lo <= x <= hi):
             raise ConfigError(f"{name} must be in [{lo:g}, {hi:g}], got {x}")
+
+
+def validate_model(model: Model) -> None:
+    """Every float field finite, each named field in its :attr:`Model.ranges`,
+    and the model's own rules (:meth:`Model.invalid`), on concrete values."""
+    cls = type(model).__name__
+    for path, leaf in jax.tree_util.tree_leaves_with_path(model):
+        if eqx.is_inexact_array(leaf) and not isinstance(leaf, jax.core.Tracer):
+            if not np.all(np.isfinite(np.asarray(leaf))):
+                raise ConfigError(f"{cls}{jax.tree_util.keystr(path)} must be finite, got {np.asarray(leaf).tolist()}")
+    for name, rng in model.ranges.items():
+        value = np.asarray(getattr(model, name))
+        if not rng.contains(value):
+            raise ConfigError(f"{cls}.{name} must be in {rng.text()}, got {value.tolist()}")
+    message = model.invalid()
+    if message:
+        raise ConfigError(f"{cls}.{message}")
 
 
 def validate_initial_state(model: Model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9) -> None:
@@ -228,6 +296,8 @@ def simulate(
     progress: bool = False,
     on_chunk: Callable[[int, "Solution"], None] | None = None,
     observe: Observe | None = None,
+    record_every: int = 1,
+    dtype: str = "float64",
 ) -> Solution:
     """Integrate ``model`` from t0 to t1 [s] with step h [s] by ``scheme``.
 
@@ -245,10 +315,18 @@ def simulate(
         on_chunk: called as ``on_chunk(k, partial)`` after chunk k with that
             chunk's records (a :class:`Solution` of the chunk alone).
         observe: computes named observables from the finished solution.
+        record_every: keep the records of every k-th step (and of the last) in
+            the solution; ``stats``, ``failed_steps`` and ``on_chunk`` still see
+            every step. Use it for long runs: memory stays flat.
+        dtype: ``"float64"`` (default) or ``"float32"``: the precision of the
+            whole run (model, state, operators, records). In float32 the
+            round-off of an assembled stiff force can exceed eq. 51's bound at
+            the default ``tol_r = 1e-5``; see README "Precision".
 
     Everything is validated before anything is traced.
     """
     validate_scheme(scheme)
+    validate_model(model)
     h = _check_finite_positive("h", h)
     t0 = float(t0)
     t1 = float(t1)
@@ -259,7 +337,74 @@ def simulate(
     q0 = np.asarray(q0, dtype=float).reshape(-1) if np.ndim(q0) else np.asarray([q0], float)
     v0 = np.asarray(v0, dtype=float).reshape(-1) if np.ndim(v0) else np.asarray([v0], float)
     validate_initial_state(model, q0, v0)
+    for name, value in (("record_every", record_every), ("chunk_size", chunk_size or 1)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
+    if dtype not in DTYPES:
+        raise ConfigError(f"dtype must be one of {', '.join(map(repr, DTYPES))}, got {dtype!r}")
+    with precision(dtype):
+        sol, error = _integrate(*_cast((model, scheme), dtype), t0, t1, h, q0.astype(dtype), v0.astype(dtype),
+                                throw=throw, chunk_size=chunk_size, progress=progress, on_chunk=on_chunk,
+                                record_every=record_every, dtype=dtype)
+    if observe is not None:  # in float64, from the (possibly float32) states
+        sol.observables = {k: np.asarray(v) for k, v in observe(_float64_view(sol)).items()}
+    if error is not None:
+        error.solution = sol
+        raise error
+    return sol
 
+
+DTYPES = ("float64", "float32")
+
+
+@contextlib.contextmanager
+def precision(dtype: str):
+    """Run the enclosed JAX code in ``dtype`` ("float64" or "float32").
+
+    float32 turns ``jax_enable_x64`` off for the enclosed code and clears JAX's
+    caches on entry and on exit: JAX caches the constants a traced function
+    closes over (NumPy arrays) without their precision, so a function traced in
+    one precision would otherwise be lowered with the other's constants. A
+    float32 run therefore compiles afresh each time.
+    """
+    if dtype == "float64" and jax.config.jax_enable_x64:
+        yield
+        return
+    jax.clear_caches()
+    try:
+        with jax.enable_x64(dtype == "float64"):
+            yield
+    finally:
+        jax.clear_caches()
+
+
+def _cast(tree, dtype: str):
+    """Every floating-point leaf of ``tree`` (arrays and NumPy scalars) as ``dtype``."""
+
+    def cast(x):
+        return jnp.asarray(x, dtype) if eqx.is_inexact_array(x) or isinstance(x, np.floating) else x
+
+    return jax.tree_util.tree_map(cast, tree)
+
+
+def _float64_view(sol: Solution) -> Solution:
+    """``sol`` with its floating-point arrays in float64 (itself if they are)."""
+    if sol.q.dtype == np.float64:
+        return sol
+
+    def up(x):
+        x = np.asarray(x)
+        return x.astype(np.float64) if np.issubdtype(x.dtype, np.floating) else x
+
+    return dataclasses.replace(sol, ts=up(sol.ts), q=up(sol.q), v=up(sol.v),
+                               records=jax.tree_util.tree_map(up, sol.records))
+
+
+def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
+               record_every, dtype) -> tuple[Solution, ConvergenceError | None]:
+    """The time loop of :func:`simulate` on validated arguments, in the precision
+    already set by the caller; returns the solution and, when ``throw`` and a
+    step failed, the error to raise."""
     n_steps = _n_steps(t0, t1, h)
     if chunk_size:
         n_chunks = -(-n_steps // chunk_size)
@@ -284,7 +429,9 @@ def simulate(
     compile_time += time.perf_counter() - tc
 
     chunks = []
+    totals = RunTotals()
     first_failure = None
+    steps_done = 0
     for k in range(n_chunks):
         tw = time.perf_counter()
         carry, (out, done) = run(model, scheme, ops, carry, *consts, length)
@@ -292,20 +439,22 @@ def simulate(
         wall += time.perf_counter() - tw
         out, done = jax.device_get((out, done))
         out = jax.tree_util.tree_map(lambda x: x[done], out)
-        chunks.append(out)
         if on_chunk is not None:
             on_chunk(k, out)
-        steps_done = sum(len(c.t) for c in chunks)
-        if progress:
-            print(f"\r  step {steps_done}/{n_steps} ({100.0 * steps_done / n_steps:5.1f} %)",
-                  end="" if k + 1 < n_chunks else "\n", file=sys.stderr, flush=True)
+        first = steps_done + 1
+        totals.add(out, first_step=first)
+        steps_done += len(out.t)
         bad = np.nonzero(out.result != Result.successful)[0]
         if first_failure is None and bad.size:
             i = int(bad[0])
-            first_failure = (steps_done - len(out.t) + i + 1, out, i)
-        if throw and first_failure is not None:
-            if progress:
-                print(file=sys.stderr)
+            first_failure = (first + i, out, i)
+        stop = throw and first_failure is not None
+        last = stop or k + 1 == n_chunks
+        chunks.append(_every(out, first, record_every, keep_last=last))
+        if progress:
+            print(f"\r  step {steps_done}/{n_steps} ({100.0 * steps_done / n_steps:5.1f} %)",
+                  end="" if not last else "\n", file=sys.stderr, flush=True)
+        if stop:
             break
 
     records = _prepend_initial(model, chunks, t0, q0, v0)
@@ -315,31 +464,49 @@ def simulate(
         v=np.asarray(records.v),
         records=records,
         h=h,
-        n_steps=len(records.t) - 1,
+        n_steps=steps_done,
         n_steps_requested=n_steps,
         result=Result.successful if first_failure is None else Result(int(first_failure[1].result[first_failure[2]])),
         wall_time=wall,
         compile_time=compile_time,
+        totals=totals,
     )
-    if observe is not None:
-        sol.observables = {k: np.asarray(v) for k, v in observe(sol).items()}
-    if throw and first_failure is not None:
-        step, out, i = first_failure
-        result = Result(int(out.result[i]))
-        if result.subproblem in SUBPROBLEMS:
-            j = SUBPROBLEMS.index(result.subproblem)
-        else:  # a coupled iteration: report its worst residual
-            j = int(np.argmax(out.residual[i] / np.maximum(out.tolerance[i], 1e-300)))
-        err = ConvergenceError(
-            step=step,
-            time=float(out.t[i]),
-            result=Result(int(out.result[i])),
-            residual=float(out.residual[i, j]),
-            tolerance=float(out.tolerance[i, j]),
-        )
-        err.solution = sol
-        raise err
-    return sol
+    if not (throw and first_failure is not None):
+        return sol, None
+    step, out, i = first_failure
+    result = Result(int(out.result[i]))
+    if result.subproblem in SUBPROBLEMS:
+        j = SUBPROBLEMS.index(result.subproblem)
+    else:  # a coupled iteration: report its worst residual
+        j = int(np.argmax(out.residual[i] / np.maximum(out.tolerance[i], 1e-300)))
+    err = ConvergenceError(
+        step=step,
+        time=float(out.t[i]),
+        result=result,
+        residual=float(out.residual[i, j]),
+        tolerance=float(out.tolerance[i, j]),
+        hint=FLOAT32_HINT if dtype == "float32" and result in CAPPED else "",
+    )
+    return sol, err
+
+
+CAPPED = (Result.smooth_max_iter, Result.position_max_iter, Result.velocity_max_iter, Result.coupled_max_iter)
+FLOAT32_HINT = (
+    "The run is in float32 (eps = 1.2e-7): if the residual is within a few hundred eps of the size of "
+    "its terms, the limit is the precision; rerun in float64."
+)
+
+
+def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> StepOutput:
+    """The records of the steps whose number is a multiple of ``k`` (and the
+    chunk's last step if ``keep_last``); the chunk starts at step ``first_step``."""
+    if k == 1:
+        return records
+    numbers = first_step + np.arange(len(records.t))
+    keep = numbers % k == 0
+    if keep_last and len(keep):
+        keep[-1] = True
+    return jax.tree_util.tree_map(lambda x: x[keep], records)
 
 
 def _prepend_initial(model: Model, chunks: list[StepOutput], t0, q0, v0) -> StepOutput:

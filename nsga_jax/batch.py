@@ -18,14 +18,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._simulate import (
+    DTYPES,
     Observe,
     Solution,
+    _cast,
     _check_finite_positive,
+    _float64_view,
     _n_steps,
     _prepare_and_init_raw,
     _prepend_initial,
     _run_chunk,
+    precision,
     validate_initial_state,
+    validate_model,
     validate_scheme,
 )
 from .integrators.base import AbstractScheme
@@ -58,14 +63,17 @@ def simulate_batch(
     *,
     chunk_size: int = 4096,
     observe: Observe | None = None,
+    dtype: str = "float64",
 ) -> list[Solution]:
     """Integrate one problem with every step size in ``hs`` at once (``vmap``).
 
     Failures never stop the batch (one bad member must not kill a sweep): each
     member's records carry its result codes and ``Solution.result`` its first
     failure. ``wall_time`` and ``compile_time`` are those of the whole batch.
+    ``dtype`` is the precision, as in :func:`~nsga_jax.simulate`.
     """
     validate_scheme(scheme)
+    validate_model(model)
     hs = np.asarray([_check_finite_positive("h", h) for h in np.atleast_1d(hs)])
     t0, t1 = float(t0), float(t1)
     if not t1 > t0:
@@ -75,7 +83,20 @@ def simulate_batch(
     q0 = np.asarray(q0, dtype=float).reshape(-1)
     v0 = np.asarray(v0, dtype=float).reshape(-1)
     validate_initial_state(model, q0, v0)
+    if dtype not in DTYPES:
+        raise ConfigError(f"dtype must be one of {', '.join(map(repr, DTYPES))}, got {dtype!r}")
+    with precision(dtype):
+        solutions = _integrate_batch(*_cast((model, scheme), dtype), t0, t1, hs, q0.astype(dtype),
+                                     v0.astype(dtype), chunk_size)
+    if observe is not None:
+        for sol in solutions:
+            sol.observables = {k: np.asarray(v) for k, v in observe(_float64_view(sol)).items()}
+    return solutions
 
+
+def _integrate_batch(model, scheme, t0, t1, hs, q0, v0, chunk_size) -> list[Solution]:
+    """The batched loop of :func:`simulate_batch` on validated arguments, in the
+    precision already set by the caller."""
     n_steps = np.array([_n_steps(t0, t1, h) for h in hs])
     longest = int(n_steps.max())
     n_chunks = -(-longest // chunk_size)
@@ -119,7 +140,5 @@ def simulate_batch(
             result=Result(int(codes[bad[0]])) if bad.size else Result.successful,
             wall_time=wall, compile_time=compile_time,
         )
-        if observe is not None:
-            sol.observables = {k: np.asarray(v) for k, v in observe(sol).items()}
         solutions.append(sol)
     return solutions

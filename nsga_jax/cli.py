@@ -23,6 +23,10 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--scheme", choices=("ds", "dsn", "cs", "mj"), help="time integration scheme")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a config key (repeatable), e.g. --set e=0.5")
+    run.add_argument("--dtype", choices=("float64", "float32"), help="floating-point precision (default float64)")
+    run.add_argument("--record-every", type=int, metavar="K",
+                     help="keep every K-th step in memory and in trajectory.npz; every step still goes to "
+                          "DIR/steps/ and into the statistics (flat memory for long runs)")
     run.add_argument("--no-throw", action="store_true",
                      help="keep going past an unconverged step and mark it in the results")
     run.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>)")
@@ -78,7 +82,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def _run(args) -> int:
     overrides = dict(parse_override(s) for s in args.set)
-    for key, value in (("h", args.h), ("t_end", args.t_end), ("rho_inf", args.rho_inf), ("scheme", args.scheme)):
+    for key, value in (("h", args.h), ("t_end", args.t_end), ("rho_inf", args.rho_inf), ("scheme", args.scheme),
+                       ("dtype", args.dtype), ("record_every", args.record_every)):
         if value is not None:
             overrides[key] = value
     scene = load_scene(args.scene, overrides)
@@ -88,7 +93,7 @@ def _run(args) -> int:
     s = scene.solver
     if not args.quiet:
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
-              f"rho_inf = {s['rho_inf']:g}", file=sys.stderr)
+              f"rho_inf = {s['rho_inf']:g}, {s['dtype']}", file=sys.stderr)
     failure = None
     try:
         sol = scene.run(throw=not args.no_throw, progress=not args.quiet,

@@ -2,7 +2,10 @@
 
 While a run is going, each finished chunk of steps is written at once to
 ``DIR/partial/chunk_XXXXX.npz``, so an interrupted run loses nothing already
-computed; the chunk files are merged into ``DIR/trajectory.npz`` at the end.
+computed. At the end ``DIR/trajectory.npz`` holds the solution's records;
+when they keep every step the chunk files are deleted, else (``record_every >
+1``) they are kept in ``DIR/steps/`` as the full-resolution record
+(:func:`load_chunks` reads them back).
 """
 
 from __future__ import annotations
@@ -65,7 +68,13 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, P
     if sol.observables:
         paths["observables_plot"] = plot_observables(sol, out_dir / "observables.png", info.get("scene", ""))
     paths["iterations_plot"] = plot_iterations(sol, out_dir / "iterations.png")
-    shutil.rmtree(out_dir / "partial", ignore_errors=True)
+    partial = out_dir / "partial"
+    if len(sol.ts) == sol.n_steps + 1:  # every step is in trajectory.npz
+        shutil.rmtree(partial, ignore_errors=True)
+    elif partial.exists():
+        shutil.rmtree(out_dir / "steps", ignore_errors=True)
+        partial.rename(out_dir / "steps")
+        paths["steps"] = out_dir / "steps"
     return paths
 
 
@@ -107,13 +116,14 @@ def plot_iterations(sol: Solution, path: Path) -> Path:
     return path
 
 
-def load_partial(out_dir: Path) -> dict[str, np.ndarray]:
-    """Concatenate the chunk files an interrupted run left in ``DIR/partial``."""
-    files = sorted((Path(out_dir) / "partial").glob("chunk_?????.npz"))
+def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]:
+    """Concatenate the chunk files in ``DIR/partial`` (an interrupted run) or
+    ``DIR/steps`` (every step of a run with ``record_every > 1``)."""
+    files = sorted((Path(out_dir) / folder).glob("chunk_?????.npz"))
     if not files:
         return {}
     parts = [dict(np.load(f)) for f in files]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-__all__ = ["chunk_writer", "write_run", "summary", "load_partial", "plot_observables", "plot_iterations"]
+__all__ = ["chunk_writer", "write_run", "summary", "load_chunks", "plot_observables", "plot_iterations"]

@@ -59,7 +59,8 @@ class ConvergenceError(RuntimeError):
     """A step failed; carries where and why, and the trajectory up to that step
     (``solution``, set by :func:`~nsga_jax.simulate`)."""
 
-    def __init__(self, step: int, time: float, result: Result, residual: float, tolerance: float):
+    def __init__(self, step: int, time: float, result: Result, residual: float, tolerance: float,
+                 hint: str = ""):
         self.solution = None
         self.step = step
         self.time = time
@@ -69,5 +70,6 @@ class ConvergenceError(RuntimeError):
         super().__init__(
             f"step {step} (t = {time:.6g} s): {result.message}; "
             f"residual {residual:.3e} vs tolerance {tolerance:.3e}. "
-            "Pass throw=False (CLI: --no-throw) to keep going and mark failed steps."
+            + (f"{hint} " if hint else "")
+            + "Pass throw=False (CLI: --no-throw) to keep going and mark failed steps."
         )

@@ -35,9 +35,10 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._custom_types import Scalar
+from ._simulate import validate_model
 from .integrators.base import AbstractScheme, StepOutput, StepState
 from .models.base import Model
-from .results import Result
+from .results import ConfigError, Result
 
 STEP_RESIDUALS_BYTES = 2**28  # per chunk: above this, each step is checkpointed as well
 
@@ -110,8 +111,13 @@ def trajectory(
     Returns:
         A :class:`Trajectory`.
     """
-    if not isinstance(n_steps, int) or n_steps < 1:
-        raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+    for name, value in (("n_steps", n_steps), ("checkpoint_every", checkpoint_every or 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
+    validate_model(model)  # concrete fields only: traced ones are checked where they were made
+    for name, x in (("q0", q0), ("v0", v0)):
+        if jnp.shape(x) != (model.n_dof,):
+            raise ConfigError(f"{name} must have shape ({model.n_dof},), got {jnp.shape(x)}")
     scheme = dataclasses.replace(scheme, differentiable=True)
     scheme.bounds()  # schemes without an implicit adjoint refuse here
     dtype = jnp.result_type(float)

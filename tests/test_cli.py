@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from nsga_jax.cli import main
-from nsga_jax.output import load_partial
+from nsga_jax.output import load_chunks
 from nsga_jax.scenes import REGISTRY, load_scene
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -41,7 +41,7 @@ def test_chunks_are_written_as_they_finish(tmp_path):
     out = tmp_path / "partial_run"
     scene = load_scene("bouncing_ball", {"t_end": 1.0, "h": 1e-2})
     sol = scene.run(chunk_size=30, on_chunk=chunk_writer(out))
-    partial = load_partial(out)
+    partial = load_chunks(out)
     assert len(list((out / "partial").glob("*.npz"))) == 4
     np.testing.assert_array_equal(partial["q"], sol.q[1:])
 

@@ -2,13 +2,15 @@
 before anything is traced or compiled."""
 
 import math
+import re
 
+import equinox as eqx
 import numpy as np
 import pytest
 
 import nsga_jax as nj
 import nsga_jax._simulate as simulate_module
-from nsga_jax.scenes import load_scene
+from nsga_jax.scenes import REGISTRY, load_scene
 
 
 @pytest.fixture(autouse=True)
@@ -126,3 +128,93 @@ def test_bilateral_violation_at_start_is_refused():
     pendulum = nj.RigidPendulum(m=1.0, length=1.0, gravity=9.81, wall_x=-0.5, side=1.0, e=0.5)
     refused(r"violates bilateral constraint 0", nj.simulate, pendulum, nj.DS(), 0.0, 1.0, 1e-3,
             np.array([0.0, -1.2]), np.zeros(2))
+
+
+# ------------------------------------------------- every rule of every field
+
+def _violations(p):
+    """(bad value, expected message) for every rule a config field states."""
+    rng = re.escape(p.range_text())
+    if p.kind == "choice":
+        return [("no-such-choice", "must be one of")]
+    out = [("abc", "must be a number"), (True, "must be a number"), (math.inf, "must be finite")]
+    if p.kind == "float":
+        out.append((math.nan, "must be finite"))
+    if p.lo > -math.inf:
+        out.append((p.lo if p.lo_open else p.lo - max(1.0, abs(p.lo)), f"must be in {rng}"))
+    if p.hi < math.inf:
+        out.append((p.hi if p.hi_open else p.hi + max(1.0, abs(p.hi)), f"must be in {rng}"))
+    if p.kind == "int":
+        out.append((p.lo + 0.5, "must be an integer"))
+    return out
+
+
+RULES = [
+    pytest.param(scene, key, value, message, id=f"{scene}-{key}-{value!r}")
+    for scene, spec in sorted(REGISTRY.items())
+    for key, p in {**spec.parameters, **spec.solver_specs()}.items()
+    for value, message in _violations(p)
+]
+
+
+@pytest.mark.parametrize("scene, key, value, message", RULES)
+def test_every_rule_of_every_config_field(scene, key, value, message):
+    with pytest.raises(nj.ConfigError) as info:
+        load_scene(scene, {key: value})
+    assert re.search(rf"\b{re.escape(key)}\b", str(info.value)), str(info.value)
+    assert re.search(message, str(info.value)), str(info.value)
+
+
+@pytest.mark.parametrize(
+    "model, match",
+    [
+        (nj.BouncingBall(m=0.0, gravity=9.81, e=0.5), r"BouncingBall.m must be in \(0, inf\), got 0.0"),
+        (nj.BouncingBall(m=1.0, gravity=math.nan, e=0.5), r"BouncingBall.gravity must be finite"),
+        (nj.BouncingBall(m=1.0, gravity=9.81, e=1.5), r"BouncingBall.e must be in \[0, 1\]"),
+        (nj.RigidPendulum(m=1.0, length=-1.0, gravity=9.81, wall_x=-0.5, side=1.0, e=0.5),
+         r"RigidPendulum.length must be in \(0, inf\)"),
+    ],
+)
+def test_model_fields_are_checked(model, match):
+    refused(match, nj.simulate, model, nj.DS(), 0.0, 1.0, 1e-3, np.ones(model.n_dof), np.zeros(model.n_dof))
+
+
+def test_model_fields_of_every_scene_are_checked():
+    """Every model's declared ranges hold its scene's defaults, and each is enforced."""
+    for name in REGISTRY:
+        scene = load_scene(name)
+        model = scene.model
+        simulate_module.validate_model(model)
+        assert model.ranges, f"{type(model).__name__} declares no ranges"
+        for field, rng in model.ranges.items():
+            bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
+            value = np.full_like(np.asarray(getattr(model, field)), bad)
+            broken = eqx.tree_at(lambda m, f=field: getattr(m, f), model, value)
+            with pytest.raises(nj.ConfigError, match=rf"{type(model).__name__}.{field} must be in"):
+                simulate_module.validate_model(broken)
+
+
+def test_rigid_body_inertia_must_be_positive_definite():
+    box = load_scene("rigid_box").model
+    broken = eqx.tree_at(lambda m: m.inertia, box, np.diag([1.0, -1.0, 1.0]))
+    refused(r"inertia must be positive definite", simulate_module.validate_model, broken)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"dtype": "float16"}, r"dtype must be one of 'float64', 'float32'"),
+        ({"record_every": 0}, r"record_every must be an integer >= 1"),
+        ({"record_every": 2.5}, r"record_every must be an integer >= 1"),
+        ({"chunk_size": -3}, r"chunk_size must be an integer >= 1"),
+    ],
+)
+def test_simulate_options_are_checked(kwargs, match):
+    refused(match, nj.simulate, BALL, nj.DS(), 0.0, 1.0, 1e-3, [1.0], [0.0], **kwargs)
+
+
+def test_trajectory_arguments_are_checked():
+    refused(r"n_steps must be an integer >= 1", nj.trajectory, BALL, nj.DS(), 0.0, 1e-3, 0, np.ones(1), np.zeros(1))
+    refused(r"q0 must have shape \(1,\)", nj.trajectory, BALL, nj.DS(), 0.0, 1e-3, 10, np.ones(2), np.zeros(1))
+    refused(r"BouncingBall.e must be in", nj.trajectory, nj.BouncingBall(m=1.0, gravity=9.81, e=2.0), nj.DS(),
+            0.0, 1e-3, 10, np.ones(1), np.zeros(1))

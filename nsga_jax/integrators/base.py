@@ -224,6 +224,15 @@ def roundoff_floor(scale: Scalar, K_norm, C_norm, q, v, inertia: Scalar = 0.0) -
     return ROUNDOFF_FACTOR * eps * scale * (K_norm * jnp.linalg.norm(q) + C_norm * jnp.linalg.norm(v) + inertia)
 
 
+def constraint_floor(k: Scalar, G: jax.Array, x: Vector) -> Scalar:
+    """``ROUNDOFF_FACTOR * eps * k * ||G|| ||x||``: the round-off of a scaled
+    constraint row ``k g(q)`` (x = q) or ``k g_q v`` (x = v) at its solution,
+    where the row's exact value is zero. Negligible in float64 against eq. 51's
+    bound; in float32 it is what lets a converged projection pass the test."""
+    eps = jnp.finfo(x.dtype).eps
+    return ROUNDOFF_FACTOR * eps * k * jnp.linalg.norm(G) * jnp.linalg.norm(x)
+
+
 def pad_bilateral(model: Model, lam: jax.Array) -> jax.Array:
     """Embed a bilateral multiplier (nb,) in the full constraint space (nc,)."""
     return jnp.concatenate([lam, jnp.zeros((model.n_unilateral,), lam.dtype)])

@@ -29,6 +29,7 @@ from .base import (
     StepState,
     augmented_residual,
     constant_operators,
+    constraint_floor,
     constraint_jacobian,
     convective,
     curvature,
@@ -142,6 +143,7 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
         if model.n_constraints == 0:
             return (-solve_A(res.r), Lam), floor
         G = constraint_jacobian(model, ops, q)
+        floor = floor + constraint_floor(kv, G, v)
         G_low = G + h * theta * convective(model, q, v)
         dv, dLam = solve_bordered(solve_A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv,
                                   ops.velocity_inv_Gt)

@@ -30,6 +30,7 @@ from .base import (
     Scaling,
     augmented_residual,
     bilateral_jacobian,
+    constraint_floor,
     constraint_jacobian,
     convective,
     curvature,
@@ -106,6 +107,7 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
         if nb == 0:
             return (-solve(res.r), jnp.zeros((0,), vt.dtype)), floor
         GB = bilateral_jacobian(model, ops, q)
+        floor = floor + constraint_floor(ks, GB, vt)
         G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
         dv, dlam = solve_bordered(solve, res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool),
                                   ks, ps, ops.smooth_inv_Gt)
@@ -157,11 +159,11 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         U, nu = x
         active, xi, _, G = res.aux
         q = smooth.q + U
+        floor = constraint_floor(kp, G, q)
+        K = None
         if with_forces:
             K, _, K_norm, C_norm = tangents(model, ops, q, smooth.v, t)
-            floor = roundoff_floor(h**2, K_norm, C_norm, q, smooth.v)
-        else:
-            K, floor = None, jnp.zeros(())
+            floor = floor + roundoff_floor(h**2, K_norm, C_norm, q, smooth.v)
         if ops.position_inv is not None:
             solve = inverse_solve(ops.position_inv)
         else:
@@ -227,10 +229,10 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         W, Lam = x
         active = res.aux[0]
         v = smooth.v + W
-        C, floor = None, jnp.zeros(())
+        C, floor = None, constraint_floor(kv, G, v)
         if with_forces:
             _, C, K_norm, C_norm = tangents(model, ops, q, v, t)
-            floor = roundoff_floor(h, K_norm, C_norm, q, v)
+            floor = floor + roundoff_floor(h, K_norm, C_norm, q, v)
         if ops.velocity_inv is not None:
             solve = inverse_solve(ops.velocity_inv)
         else:

@@ -11,7 +11,7 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
-from .base import Model
+from .base import POSITIVE, UNIT_INTERVAL, Model
 
 
 class ElasticBar(Model):
@@ -30,6 +30,8 @@ class ElasticBar(Model):
     length: Scalar = eqx.field(converter=as_float)
     gap0: Scalar = eqx.field(converter=as_float)
     e: Scalar = eqx.field(converter=as_float)
+
+    ranges = {"E": POSITIVE, "rho": POSITIVE, "area": POSITIVE, "length": POSITIVE, "e": UNIT_INTERVAL}
     n_elements: int = eqx.field(static=True)
     lumped: bool = eqx.field(static=True, default=False)
 

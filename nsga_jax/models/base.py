@@ -21,12 +21,39 @@ internal + damping + complementary inertia); its tangents are
 from __future__ import annotations
 
 import abc
+import math
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
+
+
+class Range(NamedTuple):
+    """A field's allowed interval; ``lo_open``/``hi_open`` exclude the bound."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def contains(self, x) -> bool:
+        x = np.asarray(x)
+        above = x > self.lo if self.lo_open else x >= self.lo
+        below = x < self.hi if self.hi_open else x <= self.hi
+        return bool(np.all(above & below))
+
+    def text(self) -> str:
+        left = "(" if self.lo_open or self.lo == -math.inf else "["
+        right = ")" if self.hi_open or self.hi == math.inf else "]"
+        return f"{left}{self.lo:g}, {self.hi:g}{right}"
+
+
+POSITIVE = Range(0.0, math.inf, lo_open=True)
+UNIT_INTERVAL = Range(0.0, 1.0)
 
 
 class Model(eqx.Module):
@@ -41,6 +68,16 @@ class Model(eqx.Module):
     assembled from elements override :meth:`tangents` with element-level
     tangents (see :mod:`nsga_jax.assembly`).
     """
+
+    ranges: ClassVar[dict[str, Range]] = {}
+    """Allowed range of named float fields (every element of an array field),
+    checked with concrete values by :func:`~nsga_jax.simulate` before tracing;
+    every float field must be finite in any case."""
+
+    def invalid(self) -> str | None:
+        """A rule on concrete values that ``ranges`` cannot state (e.g. a positive
+        definite inertia tensor): the broken rule's message, or ``None``."""
+        return None
 
     # ----------------------------------------------------------- structure
     @property

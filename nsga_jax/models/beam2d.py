@@ -12,7 +12,7 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.beam2d import beam_energy, beam_internal_force, beam_mass
-from .base import Model
+from .base import POSITIVE, UNIT_INTERVAL, Model, Range
 
 
 class PlanarBeam(Model):
@@ -46,6 +46,9 @@ class PlanarBeam(Model):
     side: Scalar = eqx.field(converter=as_float)
     e: Scalar = eqx.field(converter=as_float)
     tip_load: jax.Array = eqx.field(converter=as_float)
+
+    ranges = {"EA": POSITIVE, "GAs": POSITIVE, "EI": POSITIVE, "length": POSITIVE, "rhoA": POSITIVE,
+              "rhoI": Range(0.0), "side": Range(-1.0, 1.0), "e": UNIT_INTERVAL}
     n_elements: int = eqx.field(static=True)
     pinned: bool = eqx.field(static=True, default=True)
     clamped: bool = eqx.field(static=True, default=False)

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
-from .base import Model
+from .base import POSITIVE, UNIT_INTERVAL, Model, Range
 
 
 class BouncingBall(Model):
@@ -21,6 +21,8 @@ class BouncingBall(Model):
     m: Scalar = eqx.field(converter=as_float)
     gravity: Scalar = eqx.field(converter=as_float)
     e: Scalar = eqx.field(converter=as_float)
+
+    ranges = {"m": POSITIVE, "e": UNIT_INTERVAL}
 
     n_dof = 1
     n_unilateral = 1
@@ -68,6 +70,8 @@ class RigidPendulum(Model):
     wall_x: Scalar = eqx.field(converter=as_float)
     side: Scalar = eqx.field(converter=as_float)
     e: Scalar = eqx.field(converter=as_float)
+
+    ranges = {"m": POSITIVE, "length": POSITIVE, "side": Range(-1.0, 1.0), "e": UNIT_INTERVAL}
 
     n_dof = 2
     n_bilateral = 1

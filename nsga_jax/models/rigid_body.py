@@ -5,6 +5,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
@@ -15,7 +16,7 @@ from ..elements.rigid_body import (
     point_position,
     rigidity_constraints,
 )
-from .base import Model
+from .base import POSITIVE, UNIT_INTERVAL, Model
 
 
 class RigidBody(Model):
@@ -40,6 +41,16 @@ class RigidBody(Model):
     floor_z: Scalar = eqx.field(converter=as_float)
     e: jax.Array = eqx.field(converter=as_float)
     size: Scalar = eqx.field(converter=as_float)
+
+    ranges = {"mass_": POSITIVE, "e": UNIT_INTERVAL, "size": POSITIVE}
+
+    def invalid(self) -> str | None:
+        J = np.asarray(self.inertia)
+        if J.shape != (3, 3) or not np.allclose(J, J.T, rtol=1e-12, atol=0.0):
+            return f"inertia must be a symmetric (3, 3) tensor [kg m^2], got {J.tolist()}"
+        if np.linalg.eigvalsh(J).min() <= 0:
+            return f"inertia must be positive definite, got eigenvalues {np.linalg.eigvalsh(J).tolist()}"
+        return None
     contact: bool = eqx.field(static=True, default=True)
 
     n_dof = 12

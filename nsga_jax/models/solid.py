@@ -11,7 +11,7 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.hex8 import hex8_body_force, hex8_geometry, hex8_internal_force, hex8_mass, lame, svk_energy
-from .base import Model
+from .base import POSITIVE, UNIT_INTERVAL, Model, Range
 
 
 class HexSolid(Model):
@@ -34,6 +34,9 @@ class HexSolid(Model):
     gravity: Scalar = eqx.field(converter=as_float)
     floor_z: Scalar = eqx.field(converter=as_float)
     e: Scalar = eqx.field(converter=as_float)
+
+    ranges = {"E": POSITIVE, "nu": Range(-1.0, 0.5, lo_open=True, hi_open=True), "rho": POSITIVE,
+              "e": UNIT_INTERVAL}
     connectivity: StaticIndex = eqx.field(static=True)
     contact_nodes: StaticIndex = eqx.field(static=True)
 

@@ -56,8 +56,10 @@ class Scene:
         return make_scheme(self.solver)
 
     def run(self, **kwargs) -> Solution:
-        """Simulate from t = 0 to ``t_end`` with step ``h``; keyword arguments go to
-        :func:`~nsga_jax.simulate`."""
+        """Simulate from t = 0 to ``t_end`` with step ``h`` in the configured
+        ``dtype``, keeping every ``record_every``-th step; keyword arguments go
+        to :func:`~nsga_jax.simulate` (and take precedence)."""
+        kwargs = {"dtype": self.solver["dtype"], "record_every": self.solver["record_every"], **kwargs}
         return simulate(
             self.model, self.scheme(), 0.0, self.solver["t_end"], self.solver["h"],
             self.q0, self.v0, observe=self.observe, **kwargs,

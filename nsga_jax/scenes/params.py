@@ -92,6 +92,10 @@ SOLVER_PARAMS: dict[str, Param] = {
     "tol_r": Param(1e-5, "relative Newton tolerance of eq. 51", lo=0.0, lo_open=True, hi=1.0, hi_open=True),
     "tol_f": positive(1e-5, "reference Newton tolerance of eq. 51"),
     "max_iter": Param(50, "Newton iteration cap per sub-problem", kind="int", lo=1, hi=10_000),
+    "dtype": Param("float64", "floating-point precision of the run", kind="choice", choices=("float64", "float32")),
+    "record_every": Param(1, "keep every k-th step in memory and in trajectory.npz (statistics cover every "
+                          "step; the CLI writes every step to DIR/steps/ when k > 1)", kind="int", lo=1,
+                          hi=1_000_000_000),
 }
 
 
