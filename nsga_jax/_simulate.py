@@ -204,10 +204,14 @@ def validate_model(model: Model) -> None:
             if not np.all(np.isfinite(np.asarray(leaf))):
                 raise ConfigError(f"{cls}{jax.tree_util.keystr(path)} must be finite, got {np.asarray(leaf).tolist()}")
     for name, rng in model.ranges.items():
-        value = np.asarray(getattr(model, name))
+        value = getattr(model, name)
+        if isinstance(value, jax.core.Tracer):
+            continue
+        value = np.asarray(value)
         if not rng.contains(value):
             raise ConfigError(f"{cls}.{name} must be in {rng.text()}, got {value.tolist()}")
-    message = model.invalid()
+    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model))
+    message = None if traced else model.invalid()
     if message:
         raise ConfigError(f"{cls}.{message}")
 

@@ -67,6 +67,9 @@ def _parser() -> argparse.ArgumentParser:
     ident.add_argument("--every", type=int, default=1, help="--synthetic: keep every n-th step as a sample")
     ident.add_argument("--seed", type=int, default=0, help="--synthetic: seed of the noise")
     ident.add_argument("--optimizer", choices=("lbfgs", "adam"), default="lbfgs")
+    ident.add_argument("--adjoint", choices=("event", "discrete"), default="event",
+                       help="gradients that see impact instants move (default), or the time-stepping "
+                            "map's own derivative")
     ident.add_argument("--max-steps", type=int, default=100, help="optimiser iterations at most")
     ident.add_argument("--learning-rate", type=float, default=0.05, help="Adam's step (scaled parameters)")
     ident.add_argument("--h", type=float, help="step size [s]")
@@ -203,10 +206,10 @@ def _identify(args) -> int:
                               "(with --data the file's columns and times are used)")
         data = Data.load(args.data)
         true = None
-    print(f"identifying {', '.join(names)} with {args.optimizer} ...", file=sys.stderr)
+    print(f"identifying {', '.join(names)} with {args.optimizer} ({args.adjoint} gradients) ...", file=sys.stderr)
     result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
-                      progress=True,
-                      max_steps=args.max_steps, learning_rate=args.learning_rate, true=true)
+                      progress=True, max_steps=args.max_steps, learning_rate=args.learning_rate, true=true,
+                      adjoint=args.adjoint)
     paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}")
     for k in names:
         line = f"{k}: initial {result.initial[k]:.6g} -> recovered {result.recovered[k]:.6g}"

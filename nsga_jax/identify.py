@@ -25,7 +25,7 @@ import optax
 
 from .results import ConfigError
 from .scenes.base import load_scene, make_scheme, parametrize
-from .trajectory import trajectory
+from .trajectory import ADJOINTS, trajectory
 
 OPTIMIZERS = ("lbfgs", "adam")
 
@@ -113,9 +113,9 @@ class Identification:
         return out
 
 
-def _run(build, scheme, h, n_steps, p):
+def _run(build, scheme, h, n_steps, p, adjoint):
     model, q0, v0, observe = build(p)
-    return observe(trajectory(model, scheme, 0.0, h, n_steps, q0, v0))
+    return observe(trajectory(model, scheme, 0.0, h, n_steps, q0, v0, adjoint=adjoint))
 
 
 def synthetic_data(scene_name: str, overrides: dict | None, observables, noise: float = 0.0,
@@ -146,6 +146,7 @@ def identify(
     ftol: float = 1e-10,
     true: dict[str, float] | None = None,
     progress: bool = False,
+    adjoint: str = "event",
 ) -> Identification:
     """Fit the parameters ``names`` of a scene to ``data``.
 
@@ -163,6 +164,9 @@ def identify(
             iteration lowers the loss by less than ftol times its value.
         true: the true values, when known (synthetic data), for the report.
         progress: print the loss and the parameters after each iteration (stderr).
+        adjoint: ``"event"`` (default: gradients that see impact instants move,
+            :mod:`nsga_jax.events`) or ``"discrete"`` (the time-stepping map's
+            own derivative); see :func:`~nsga_jax.trajectory`.
 
     One function is compiled: the loss, its gradient (through the whole
     trajectory) and the predicted observables, together; every evaluation,
@@ -172,6 +176,8 @@ def identify(
         raise ConfigError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got {optimizer!r}")
     if max_steps < 1:
         raise ConfigError(f"max_steps must be an integer >= 1, got {max_steps}")
+    if adjoint not in ADJOINTS:
+        raise ConfigError(f"adjoint must be one of {', '.join(map(repr, ADJOINTS))}, got {adjoint!r}")
     data.check()
     overrides = dict(overrides or {})
     start = {**overrides, **(initial or {})}
@@ -194,7 +200,7 @@ def identify(
     weights = {k: 1.0 / max(float(np.mean(v**2)), 1e-300) for k, v in data.values.items()}
 
     def loss_and_prediction(u):
-        obs = _run(build, scheme, h, n_steps, {k: u[k] * scale[k] for k in names})
+        obs = _run(build, scheme, h, n_steps, {k: u[k] * scale[k] for k in names}, adjoint)
         pred = {k: jnp.interp(t_data, ts, obs[k]) for k in targets}
         loss = sum(weights[k] * jnp.mean((pred[k] - targets[k]) ** 2) for k in targets)
         return loss, pred

@@ -36,10 +36,12 @@ from jax import lax
 
 from ._custom_types import Scalar
 from ._simulate import validate_model
+from .events import with_impact_time_sensitivity
 from .integrators.base import AbstractScheme, StepOutput, StepState
 from .models.base import Model
 from .results import ConfigError, Result
 
+ADJOINTS = ("discrete", "event")
 STEP_RESIDUALS_BYTES = 2**28  # per chunk: above this, each step is checkpointed as well
 
 
@@ -88,6 +90,7 @@ def trajectory(
     observe: Callable[[StepState, StepOutput], Any] | None = None,
     throw: bool = True,
     checkpoint_steps: bool | None = None,
+    adjoint: str = "discrete",
 ) -> Trajectory:
     """Integrate ``n_steps`` steps of size ``h`` from (t0, q0, v0), differentiably.
 
@@ -107,6 +110,11 @@ def trajectory(
         checkpoint_steps: checkpoint each step inside a chunk as well (see
             above; default: only where a chunk's dense residuals would pass
             256 MiB).
+        adjoint: ``"discrete"``: the exact derivative of the time-stepping map
+            (impacts held at their steps); ``"event"``: at each step where a
+            contact closes, the derivative of a continuous-time rebuild of the
+            step, which sees the impact instant move
+            (:mod:`nsga_jax.events`). Values are the same in both modes.
 
     Returns:
         A :class:`Trajectory`.
@@ -114,6 +122,8 @@ def trajectory(
     for name, value in (("n_steps", n_steps), ("checkpoint_every", checkpoint_every or 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
+    if adjoint not in ADJOINTS:
+        raise ConfigError(f"adjoint must be one of {', '.join(map(repr, ADJOINTS))}, got {adjoint!r}")
     validate_model(model)  # concrete fields only: traced ones are checked where they were made
     for name, x in (("q0", q0), ("v0", v0)):
         if jnp.shape(x) != (model.n_dof,):
@@ -137,8 +147,12 @@ def trajectory(
 
     padded = n_chunks * c != n_steps  # the last chunk runs past n_steps: mask those steps
 
+    event = adjoint == "event" and model.n_unilateral > 0
+
     def one_step(state, k):
         new, out = scheme.step(model, ops, state, h)
+        if event:
+            new, out = with_impact_time_sensitivity(model, ops, state, new, out, h)
         state = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new, state) if padded else new
         kept = out if observe is None else (observe(new, out), out.result)
         return state, kept

@@ -1,0 +1,145 @@
+"""Impact-time sensitivity: the derivative of an impact step in continuous time.
+
+A time-stepping scheme puts every impact on the step grid. Its exact
+derivative (what :func:`~nsga_jax.trajectory` returns with
+``adjoint="discrete"``) therefore holds each impact at its step while a
+parameter moves: it misses how the impact *instant* moves, which in continuous
+time changes the state after the impact by the saltation term
+``-(F⁺ - J F⁻) δt*`` (F± the vector fields before and after, J the impact
+map's Jacobian, δt* = -δg / ġ⁻ the shift of the impact instant). On a bouncing
+ball that is half of the derivative, at every step size.
+
+With ``adjoint="event"`` each step where a contact closes (open at t_n,
+approaching, and active in the step's velocity problem) gets the derivative of
+a continuous-time rebuild of that step, exact to first order in h, while its
+value stays the scheme's:
+
+1. the impact instant t_n + τ is the first root in [0, h] of a closing
+   contact's gap along the smooth motion ``q(s) = q_n + s v_n + s²/2 a_n``
+   (a_n: the acceleration at t_n with the bilateral constraints at
+   acceleration level); Newton finds it, the implicit function theorem gives
+   its derivative;
+2. at that instant Newton's impact law acts on the contacts of the step's
+   velocity problem and the bilateral constraints hold at velocity level:
+   ``M (v⁺ - v⁻) = G_Cᵀ Λ`` with ``G_j v⁺ = -e_j G_j v⁻`` (one bordered solve);
+3. the motion goes on for h - τ with the acceleration a_n, projected so that
+   the contacts that stay closed (e = 0, or already closed) and the bilateral
+   constraints hold at acceleration level.
+
+Simultaneous contacts share the earliest instant. Steps without a closing
+contact keep the scheme's derivative exactly.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from ._custom_types import Scalar, Vector
+from .integrators.base import (
+    ROUNDOFF_FACTOR,
+    Operators,
+    StepOutput,
+    StepState,
+    consistent_acceleration,
+    constraint_jacobian,
+)
+from .integrators.linalg import REDUNDANCY_SHIFT
+from .models.base import Model
+
+NEWTON_ITERATIONS = 6
+"""Newton iterations on the impact instant (the gap along a quadratic motion)."""
+
+
+def closing_contacts(model: Model, G: jax.Array, state: StepState, out: StepOutput) -> jax.Array:
+    """Unilateral contacts (nu,) that close during the step: open and approaching
+    at t_n, active in the step's velocity problem."""
+    nb = model.n_bilateral
+    gap = model.unilateral(state.q)
+    gdot = (G @ state.v)[nb:]
+    open_ = gap > ROUNDOFF_FACTOR * jnp.finfo(gap.dtype).eps * (1.0 + jnp.linalg.norm(state.q))  # not resting
+    return out.active_velocity[nb:] & open_ & (gdot < 0)
+
+
+def impact_instant(model: Model, q: Vector, v: Vector, a: Vector, h: Scalar, closing: jax.Array) -> Scalar:
+    """τ in [0, h]: the earliest root of a closing contact's gap along
+    ``q + s v + s²/2 a`` (h if none); differentiable by the implicit function theorem."""
+
+    def gaps_at(s):  # (nu,) gaps, contact j at its own instant s_j
+        return jnp.diagonal(jax.vmap(lambda sj: model.unilateral(q + sj * v + 0.5 * sj**2 * a))(s))
+
+    def gaps_and_rates(s):
+        return jax.jvp(gaps_at, (s,), (jnp.ones_like(s),))
+
+    nu = model.n_unilateral
+    s = jnp.zeros((nu,), q.dtype)
+    s_sg = lax.stop_gradient(s)
+    for _ in range(NEWTON_ITERATIONS):
+        g, rate = gaps_and_rates(s_sg)
+        s_sg = jnp.clip(s_sg - g / jnp.where(rate < 0, rate, -1.0), 0.0, h)
+    s_sg = lax.stop_gradient(s_sg)
+    g, rate = gaps_and_rates(s_sg)
+    rate = lax.stop_gradient(jnp.where(rate < 0, rate, -1.0))
+    s = s_sg - g / rate + lax.stop_gradient(g / rate)  # value s*, derivative -δg/ġ (IFT)
+    s = jnp.where(closing, s, h)
+    return jnp.min(jnp.clip(s, 0.0, h))
+
+
+def _constrained(M: jax.Array, G: jax.Array, rows: jax.Array, y: Vector, target: jax.Array) -> Vector:
+    """x closest to y in the M-norm with ``G_j x = target_j`` on ``rows``:
+    ``M (x - y) = G_Rᵀ μ``, one bordered solve (inactive rows give μ_j = 0)."""
+    n = M.shape[0]
+    mask = rows.astype(M.dtype)
+    # redundant rows (a box landing flat) make the block singular: the same
+    # relative shift as the schemes' Delassus solves keeps it regular
+    shift = REDUNDANCY_SHIFT * jnp.sum(G**2) / jnp.maximum(jnp.linalg.norm(M), 1e-300)
+    A = jnp.block([[M, -(G * mask[:, None]).T], [G * mask[:, None], jnp.diag(1.0 - mask + shift * mask)]])
+    rhs = jnp.concatenate([M @ y, mask * target])
+    return jnp.linalg.solve(A, rhs)[:n]
+
+
+def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput, h: Scalar,
+                 closing: jax.Array) -> tuple[Vector, Vector]:
+    """(q, v) at t_n + h from the continuous-time rebuild of an impact step (see module)."""
+    nb = model.n_bilateral
+    q, v, t = state.q, state.v, state.t
+    a = consistent_acceleration(model, t, q, v)
+    tau = impact_instant(model, q, v, a, h, closing)
+    q_hit = q + tau * v + 0.5 * tau**2 * a
+    v_minus = v + tau * a
+    G = constraint_jacobian(model, ops, q_hit)
+    M = model.mass(q_hit)
+    e = jnp.concatenate([jnp.zeros((nb,), q.dtype), jnp.asarray(model.restitution, q.dtype)])
+    rate_minus = G @ v_minus
+    in_impact = out.active_velocity.at[:nb].set(True)
+    v_plus = _constrained(M, G, in_impact, v_minus, -e * rate_minus)
+    # contacts that stay closed after the impact (no rebound), and the joints
+    stays = in_impact & (e * jnp.abs(rate_minus) <= 1e-12 * (1.0 + jnp.abs(rate_minus)))
+    a_plus = _constrained(M, G, stays.at[:nb].set(True), a, jnp.zeros_like(e))
+    rest = h - tau
+    return q_hit + rest * v_plus + 0.5 * rest**2 * a_plus, v_plus + rest * a_plus
+
+
+def with_impact_time_sensitivity(model: Model, ops: Operators, state: StepState, new: StepState,
+                                 out: StepOutput, h: Scalar) -> tuple[StepState, StepOutput]:
+    """The step's state and record with the same values, and at a step where a
+    contact closes, the derivative of :func:`rebuilt_step` in place of the
+    scheme's derivative of (q, v)."""
+    G_n = constraint_jacobian(model, ops, state.q)
+    closing = lax.stop_gradient(closing_contacts(model, G_n, state, out))
+    any_closing = jnp.any(closing)
+
+    def carrier(args):  # value 0, derivative that of the rebuilt step
+        st, o = args
+        q_r, v_r = rebuilt_step(model, ops, st, o, h, closing)
+        return q_r - lax.stop_gradient(q_r), v_r - lax.stop_gradient(v_r)
+
+    def nothing(args):
+        return jnp.zeros_like(new.q), jnp.zeros_like(new.v)
+
+    dq, dv = lax.cond(any_closing, carrier, nothing, (state, out))
+    q = jnp.where(any_closing, lax.stop_gradient(new.q) + dq, new.q)
+    v = jnp.where(any_closing, lax.stop_gradient(new.v) + dv, new.v)
+    return eqx.tree_at(lambda s: (s.q, s.v), new, (q, v)), eqx.tree_at(lambda r: (r.q, r.v), out, (q, v))
