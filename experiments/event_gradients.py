@@ -188,8 +188,12 @@ def table(rows) -> str:
 
 def plot_convergence(rows, path: Path) -> None:
     keys = sorted({(r["case"], r["parameter"]) for r in rows}, key=lambda k: list(CASES).index(k[0]))
-    fig, axes = plt.subplots(1, len(keys), figsize=(3.0 * len(keys), 3.2), squeeze=False)
-    for ax, (case, param) in zip(axes[0], keys):
+    ncols = 4
+    nrows = -(-len(keys) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.2 * ncols, 2.9 * nrows), squeeze=False)
+    for ax in axes.flat[len(keys):]:
+        ax.set_visible(False)
+    for ax, (case, param) in zip(axes.flat, keys):
         mine = [r for r in rows if r["case"] == case and r["parameter"] == param]
         hs = [float(r["h"]) for r in mine]
         for mode, style in (("discrete", "s--"), ("event", "o-")):
@@ -197,7 +201,8 @@ def plot_convergence(rows, path: Path) -> None:
         ax.set_title(f"{case}: d/d{param}", fontsize=9)
         ax.set_xlabel("h [s]")
         ax.grid(alpha=0.3, which="both")
-    axes[0][0].set_ylabel("relative error of the gradient")
+    for row in axes:
+        row[0].set_ylabel("relative error of the gradient")
     axes[0][0].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -237,7 +242,12 @@ def plot_ball_sweep(path: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", help="comma-separated cases (default: all)")
+    ap.add_argument("--replot", action="store_true", help="redraw the convergence figure from the CSV")
     args = ap.parse_args()
+    if args.replot:
+        with open(RESULTS / "gradients.csv") as fh:
+            plot_convergence(list(csv.DictReader(fh)), FIGURES / "event_gradients_convergence.png")
+        return
     names = args.only.split(",") if args.only else list(CASES)
     RESULTS.mkdir(parents=True, exist_ok=True)
     FIGURES.mkdir(parents=True, exist_ok=True)

@@ -9,12 +9,13 @@ time changes the state after the impact by the saltation term
 map's Jacobian, δt* = -δg / ġ⁻ the shift of the impact instant). On a bouncing
 ball that is half of the derivative, at every step size.
 
-With ``adjoint="event"`` each step where a contact closes (open at t_n,
-approaching, and active in the step's velocity problem) gets the derivative of
+With ``adjoint="event"`` each step where a contact closes (active in the
+step's velocity problem and not in the previous step's, approaching at t_n)
+gets the derivative of
 a continuous-time rebuild of that step, exact to first order in h, while its
 value stays the scheme's:
 
-1. the impact instant t_n + τ is the first root in [0, h] of a closing
+1. the impact instant t_n + τ is the first root (in [-h, h]) of a closing
    contact's gap along the smooth motion ``q(s) = q_n + s v_n + s²/2 a_n``
    (a_n: the acceleration at t_n with the bilateral constraints at
    acceleration level); Newton finds it, the implicit function theorem gives
@@ -53,19 +54,27 @@ NEWTON_ITERATIONS = 6
 """Newton iterations on the impact instant (the gap along a quadratic motion)."""
 
 
-def closing_contacts(model: Model, G: jax.Array, state: StepState, out: StepOutput) -> jax.Array:
-    """Unilateral contacts (nu,) that close during the step: open and approaching
-    at t_n, active in the step's velocity problem."""
+def closing_contacts(model: Model, G: jax.Array, state: StepState, out: StepOutput,
+                     was_active: jax.Array) -> jax.Array:
+    """Unilateral contacts (nu,) that close during the step: active in the step's
+    velocity problem, not active in the previous step's (``was_active``), and
+    approaching at t_n. The gap at t_n may be negative (Moreau–Jean penetrates
+    before it detects)."""
     nb = model.n_bilateral
-    gap = model.unilateral(state.q)
-    gdot = (G @ state.v)[nb:]
-    open_ = gap > ROUNDOFF_FACTOR * jnp.finfo(gap.dtype).eps * (1.0 + jnp.linalg.norm(state.q))  # not resting
-    return out.active_velocity[nb:] & open_ & (gdot < 0)
+    gdot = G[nb:] @ state.v
+    return out.active_velocity[nb:] & ~was_active & (gdot < 0)
+
+
+def initially_active(model: Model, q0: Vector) -> jax.Array:
+    """Contacts (nu,) touching at t0 (gap within round-off of zero): not closing at the first step."""
+    gap = model.unilateral(q0)
+    return gap <= ROUNDOFF_FACTOR * jnp.finfo(gap.dtype).eps * (1.0 + jnp.linalg.norm(q0))
 
 
 def impact_instant(model: Model, q: Vector, v: Vector, a: Vector, h: Scalar, closing: jax.Array) -> Scalar:
-    """τ in [0, h]: the earliest root of a closing contact's gap along
-    ``q + s v + s²/2 a`` (h if none); differentiable by the implicit function theorem."""
+    """τ: the earliest root of a closing contact's gap along ``q + s v + s²/2 a``,
+    searched in [-h, h] (a root before t_n: the contact had penetrated at t_n);
+    h if none. Differentiable by the implicit function theorem."""
 
     def gaps_at(s):  # (nu,) gaps, contact j at its own instant s_j
         return jnp.diagonal(jax.vmap(lambda sj: model.unilateral(q + sj * v + 0.5 * sj**2 * a))(s))
@@ -78,13 +87,12 @@ def impact_instant(model: Model, q: Vector, v: Vector, a: Vector, h: Scalar, clo
     s_sg = lax.stop_gradient(s)
     for _ in range(NEWTON_ITERATIONS):
         g, rate = gaps_and_rates(s_sg)
-        s_sg = jnp.clip(s_sg - g / jnp.where(rate < 0, rate, -1.0), 0.0, h)
+        s_sg = jnp.clip(s_sg - g / jnp.where(rate < 0, rate, -1.0), -h, h)
     s_sg = lax.stop_gradient(s_sg)
     g, rate = gaps_and_rates(s_sg)
     rate = lax.stop_gradient(jnp.where(rate < 0, rate, -1.0))
     s = s_sg - g / rate + lax.stop_gradient(g / rate)  # value s*, derivative -δg/ġ (IFT)
-    s = jnp.where(closing, s, h)
-    return jnp.min(jnp.clip(s, 0.0, h))
+    return jnp.min(jnp.where(closing, s, h))
 
 
 def _constrained(M: jax.Array, G: jax.Array, rows: jax.Array, y: Vector, target: jax.Array) -> Vector:
@@ -123,12 +131,13 @@ def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput
 
 
 def with_impact_time_sensitivity(model: Model, ops: Operators, state: StepState, new: StepState,
-                                 out: StepOutput, h: Scalar) -> tuple[StepState, StepOutput]:
+                                 out: StepOutput, h: Scalar, was_active: jax.Array) -> tuple[StepState, StepOutput]:
     """The step's state and record with the same values, and at a step where a
     contact closes, the derivative of :func:`rebuilt_step` in place of the
-    scheme's derivative of (q, v)."""
+    scheme's derivative of (q, v). ``was_active``: the previous step's velocity
+    active set on the contacts (nu,)."""
     G_n = constraint_jacobian(model, ops, state.q)
-    closing = lax.stop_gradient(closing_contacts(model, G_n, state, out))
+    closing = lax.stop_gradient(closing_contacts(model, G_n, state, out, was_active))
     any_closing = jnp.any(closing)
 
     def carrier(args):  # value 0, derivative that of the rebuilt step

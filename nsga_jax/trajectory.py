@@ -36,7 +36,7 @@ from jax import lax
 
 from ._custom_types import Scalar
 from ._simulate import validate_model
-from .events import with_impact_time_sensitivity
+from .events import initially_active, with_impact_time_sensitivity
 from .integrators.base import AbstractScheme, StepOutput, StepState
 from .models.base import Model
 from .results import ConfigError, Result
@@ -148,14 +148,20 @@ def trajectory(
     padded = n_chunks * c != n_steps  # the last chunk runs past n_steps: mask those steps
 
     event = adjoint == "event" and model.n_unilateral > 0
+    nb = model.n_bilateral
 
-    def one_step(state, k):
+    def one_step(carry, k):  # carry: the state, and with adjoint="event" the contacts' last active set
+        state, was_active = carry
         new, out = scheme.step(model, ops, state, h)
         if event:
-            new, out = with_impact_time_sensitivity(model, ops, state, new, out, h)
-        state = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new, state) if padded else new
+            new, out = with_impact_time_sensitivity(model, ops, state, new, out, h, was_active)
+            new_carry = (new, out.active_velocity[nb:])
+        else:
+            new_carry = (new, was_active)
+        if padded:
+            new_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new_carry, carry)
         kept = out if observe is None else (observe(new, out), out.result)
-        return state, kept
+        return new_carry, kept
 
     if checkpoint_steps:
         one_step = jax.checkpoint(one_step)
@@ -164,7 +170,8 @@ def trajectory(
     def chunk(state, ks):
         return lax.scan(one_step, state, ks)
 
-    _, outs = lax.scan(chunk, state0, jnp.arange(n_chunks * c).reshape(n_chunks, c))
+    active0 = initially_active(model, q0) if event else jnp.zeros((0,), bool)
+    _, outs = lax.scan(chunk, (state0, active0), jnp.arange(n_chunks * c).reshape(n_chunks, c))
     outs = jax.tree_util.tree_map(lambda x: x.reshape((n_chunks * c,) + x.shape[2:])[:n_steps], outs)
     if observe is None:
         records, result = outs, outs.result

@@ -225,12 +225,14 @@ def roundoff_floor(scale: Scalar, K_norm, C_norm, q, v, inertia: Scalar = 0.0) -
 
 
 def constraint_floor(k: Scalar, G: jax.Array, x: Vector) -> Scalar:
-    """``ROUNDOFF_FACTOR * eps * k * ||G|| ||x||``: the round-off of a scaled
-    constraint row ``k g(q)`` (x = q) or ``k g_q v`` (x = v) at its solution,
-    where the row's exact value is zero. Negligible in float64 against eq. 51's
-    bound; in float32 it is what lets a converged projection pass the test."""
+    """``ROUNDOFF_FACTOR * eps * k * || |G| |x| ||``: the round-off of the scaled
+    constraint rows ``k g_q v`` (x = v) or ``k g(q)`` (x = q, for gaps about as
+    large as ``|g_q| |q|``) at their solution, where the rows' exact values are
+    zero; row by row, so that one contact's round-off never excuses another's
+    violation. Negligible in float64 against eq. 51's bound; in float32 it is
+    what lets a converged projection pass the test."""
     eps = jnp.finfo(x.dtype).eps
-    return ROUNDOFF_FACTOR * eps * k * jnp.linalg.norm(G) * jnp.linalg.norm(x)
+    return ROUNDOFF_FACTOR * eps * k * jnp.linalg.norm(jnp.abs(G) @ jnp.abs(x))
 
 
 def pad_bilateral(model: Model, lam: jax.Array) -> jax.Array:
