@@ -140,6 +140,11 @@ def with_impact_time_sensitivity(model: Model, ops: Operators, state: StepState,
     closing = lax.stop_gradient(closing_contacts(model, G_n, state, out, was_active))
     any_closing = jnp.any(closing)
 
+    # checkpointed: a cond's residuals are stored for every step (zeros where the
+    # branch is not taken), and the rebuild's dense factorisations would make
+    # them O(n²) per step; recomputing the branch in the backward pass keeps
+    # them O(n).
+    @jax.checkpoint
     def carrier(args):  # value 0, derivative that of the rebuilt step
         st, o = args
         q_r, v_r = rebuilt_step(model, ops, st, o, h, closing)
