@@ -22,7 +22,7 @@ value stays the scheme's:
    its derivative;
 2. at that instant Newton's impact law acts on the contacts of the step's
    velocity problem and the bilateral constraints hold at velocity level:
-   ``M (v⁺ - v⁻) = G_Cᵀ Λ`` with ``G_j v⁺ = -e_j G_j v⁻`` (one bordered solve);
+   ``M (v⁺ - v⁻) = G_Cᵀ Λ`` with ``G_j v⁺ = -e_j G_j v⁻`` (a Delassus solve);
 3. the motion goes on for h - τ with the acceleration a_n, projected so that
    the contacts that stay closed (e = 0, or already closed) and the bilateral
    constraints hold at acceleration level.
@@ -46,8 +46,10 @@ from .integrators.base import (
     StepState,
     consistent_acceleration,
     constraint_jacobian,
+    is_unilateral,
+    restitution,
 )
-from .integrators.linalg import REDUNDANCY_SHIFT
+from .integrators.linalg import dense_solve, masked_solve
 from .models.base import Model
 
 NEWTON_ITERATIONS = 6
@@ -97,21 +99,17 @@ def impact_instant(model: Model, q: Vector, v: Vector, a: Vector, h: Scalar, clo
 
 def _constrained(M: jax.Array, G: jax.Array, rows: jax.Array, y: Vector, target: jax.Array) -> Vector:
     """x closest to y in the M-norm with ``G_j x = target_j`` on ``rows``:
-    ``M (x - y) = G_Rᵀ μ``, one bordered solve (inactive rows give μ_j = 0)."""
-    n = M.shape[0]
-    mask = rows.astype(M.dtype)
-    # redundant rows (a box landing flat) make the block singular: the same
-    # relative shift as the schemes' Delassus solves keeps it regular
-    shift = REDUNDANCY_SHIFT * jnp.sum(G**2) / jnp.maximum(jnp.linalg.norm(M), 1e-300)
-    A = jnp.block([[M, -(G * mask[:, None]).T], [G * mask[:, None], jnp.diag(1.0 - mask + shift * mask)]])
-    rhs = jnp.concatenate([M @ y, mask * target])
-    return jnp.linalg.solve(A, rhs)[:n]
+    ``x = y + M⁻¹ G_Rᵀ μ`` with the Delassus system ``(G M⁻¹ Gᵀ)_R μ_R =
+    (target - G y)_R`` (redundant rows, a box landing flat, handled by
+    :func:`~nsga_jax.integrators.linalg.masked_solve`'s shift)."""
+    Minv_Gt = dense_solve(M)(G.T)
+    mu = masked_solve(G @ Minv_Gt, target - G @ y, rows)
+    return y + Minv_Gt @ mu
 
 
 def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput, h: Scalar,
                  closing: jax.Array) -> tuple[Vector, Vector]:
     """(q, v) at t_n + h from the continuous-time rebuild of an impact step (see module)."""
-    nb = model.n_bilateral
     q, v, t = state.q, state.v, state.t
     a = consistent_acceleration(model, t, q, v)
     tau = impact_instant(model, q, v, a, h, closing)
@@ -119,13 +117,14 @@ def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput
     v_minus = v + tau * a
     G = constraint_jacobian(model, ops, q_hit)
     M = model.mass(q_hit)
-    e = jnp.concatenate([jnp.zeros((nb,), q.dtype), jnp.asarray(model.restitution, q.dtype)])
+    e = restitution(model, q.dtype)
+    joints = ~is_unilateral(model)
     rate_minus = G @ v_minus
-    in_impact = out.active_velocity.at[:nb].set(True)
+    in_impact = out.active_velocity | joints
     v_plus = _constrained(M, G, in_impact, v_minus, -e * rate_minus)
     # contacts that stay closed after the impact (no rebound), and the joints
     stays = in_impact & (e * jnp.abs(rate_minus) <= 1e-12 * (1.0 + jnp.abs(rate_minus)))
-    a_plus = _constrained(M, G, stays.at[:nb].set(True), a, jnp.zeros_like(e))
+    a_plus = _constrained(M, G, stays | joints, a, jnp.zeros_like(e))
     rest = h - tau
     return q_hit + rest * v_plus + 0.5 * rest**2 * a_plus, v_plus + rest * a_plus
 
