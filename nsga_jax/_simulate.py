@@ -1,6 +1,6 @@
 """The time loop: ``simulate(model, scheme, t0, t1, h, q0, v0)``.
 
-The whole trajectory runs in compiled ``lax.scan`` calls over chunks of steps
+The whole trajectory runs in compiled loops over chunks of steps
 (one compilation, reused for every chunk); no Python runs inside a chunk. After
 each chunk the host adds the chunk to the run's statistics, keeps its records
 (every ``record_every``-th step of them), reports progress, hands the full
@@ -36,7 +36,6 @@ from .results import SUBPROBLEMS, ConfigError, ConvergenceError, Result
 
 Observe = Callable[["Solution"], dict[str, np.ndarray]]
 
-DEFAULT_CHUNK = 4096
 
 
 @dataclass
@@ -257,21 +256,38 @@ def _n_steps(t0: float, t1: float, h: float) -> int:
 
 
 def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
-    """``length`` steps of ``scheme`` in one scan. Steps past ``n_steps``, or after a
-    failure when ``stop_on_failure``, leave the state unchanged and are marked
-    not done (their records are dropped by the caller). Masking with ``where``
-    rather than ``lax.cond``: on CPU a cond around the step costs more than the
-    few padded steps it would save."""
+    """Up to ``length`` steps of ``scheme`` in one ``while_loop``, writing each
+    step's record into a buffer of ``length`` records. The loop stops after step
+    ``n_steps`` (or after a failure when ``stop_on_failure``); the buffer's
+    unused tail is marked not done and dropped by the caller. The step count is
+    a traced value, so runs with another h (another number of steps) reuse the
+    compilation; under ``vmap`` a member that has finished keeps its state."""
+    state, k, stopped = carry
+    template = jax.eval_shape(lambda s: scheme.step(model, ops, s, h)[1], state)
+    buffer = jax.tree_util.tree_map(lambda s: jnp.zeros((length, *s.shape), s.dtype), template)
 
-    def body(carry, _):
-        state, k, stopped = carry
-        do = (k < n_steps) & ~stopped
-        new_state, out = scheme.step(model, ops, state, h)
-        state = jax.tree_util.tree_map(lambda a, b: jnp.where(do, a, b), new_state, state)
-        failed = do & (out.result != Result.successful)
-        return (state, k + do.astype(k.dtype), stopped | (failed & stop_on_failure)), (out, do)
+    def going(c):
+        i, _, k, stopped, _ = c
+        return (i < length) & (k < n_steps) & ~stopped
 
-    return lax.scan(body, carry, None, length=length)
+    def body(c):
+        i, state, k, stopped, buffer = c
+        state, out = scheme.step(model, ops, state, h)
+        buffer = jax.tree_util.tree_map(lambda b, o: lax.dynamic_update_index_in_dim(b, o, i, 0), buffer, out)
+        failed = out.result != Result.successful
+        return i + 1, state, k + 1, stopped | (failed & stop_on_failure), buffer
+
+    i, state, k, stopped, buffer = lax.while_loop(going, body, (jnp.zeros((), k.dtype), state, k, stopped, buffer))
+    return (state, k, stopped), (buffer, jnp.arange(length) < i)
+
+
+def chunk_length(model: Model) -> int:
+    """Steps per compiled chunk, from the model's size alone (so h and parameter
+    values never change it): a power of two between 64 and 4096, about 2**18
+    recorded numbers per chunk (4096 steps for a ball, 512 for the 201-node
+    bar, 128 for the 648-dof cube)."""
+    fit = 2**18 // (2 * model.n_dof + 16)
+    return int(min(4096, max(64, 2 ** int(math.floor(math.log2(max(fit, 1)))))))
 
 
 _run_chunk_jit = eqx.filter_jit(_run_chunk)
@@ -313,8 +329,9 @@ def simulate(
         throw: stop at the first step that fails (Newton cap or NaN/inf) and
             raise :class:`ConvergenceError`; with ``False`` keep going and
             mark failed steps in ``records.result``.
-        chunk_size: steps per compiled scan (default: about a twentieth of the
-            run, between 256 and 4096 steps; every chunk reuses one compilation).
+        chunk_size: steps per compiled chunk (default: :func:`chunk_length`, from
+            the model's size; every chunk, and every run of the same model
+            structure whatever its h or parameter values, reuses one compilation).
         progress: print progress on stderr after each chunk.
         on_chunk: called as ``on_chunk(k, partial)`` after chunk k with that
             chunk's records (a :class:`Solution` of the chunk alone).
@@ -410,11 +427,8 @@ def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress,
     already set by the caller; returns the solution and, when ``throw`` and a
     step failed, the error to raise."""
     n_steps = _n_steps(t0, t1, h)
-    if chunk_size:
-        n_chunks = -(-n_steps // chunk_size)
-    else:  # about 20 progress reports, chunks of 256 to 4096 steps
-        n_chunks = max(-(-n_steps // DEFAULT_CHUNK), min(20, -(-n_steps // 256)))
-    length = -(-n_steps // n_chunks)  # equal chunks: fewer than n_chunks padded steps
+    length = chunk_size or chunk_length(model)
+    n_chunks = -(-n_steps // length)
 
     args0 = (model, scheme, jnp.asarray(t0), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h))
     tc = time.perf_counter()

@@ -1,21 +1,33 @@
-"""Many step sizes of one problem in one compiled program: ``vmap`` over h.
+"""Many runs of one model structure in one compiled program: ``vmap`` over members.
 
-The runs have different step counts, so the scan is padded to the longest run
-and each member's extra steps are masked (they leave its state unchanged and
-are dropped from its records). Every member pays the longest run's number of
-steps: batching pays when the step sizes are close, and loses to separate runs
-when they spread over decades (``experiments/bench_batch_h.py`` measures both;
-:func:`~nsga_jax.studies.run_step_sizes` picks by that rule).
+The members of a batch share the model's static structure (sizes, element
+connectivity, which constraints exist) and may differ in every array: the
+parameter values (a *stacked* model, each array leaf with a leading member
+axis), the initial state and the step size h. Their step counts differ with
+h; the time loop is a ``while_loop`` per chunk whose trip count is traced, so
+under ``vmap`` a member that has finished keeps its state while the others go
+on, and every member pays for the longest run's number of steps (batching
+over h pays when the step sizes are close; ``experiments/bench_batch_h.py``).
+
+With a device mesh (:func:`member_mesh`) the members are split over its
+devices by ``jax.shard_map``: each device runs its own members' loops with no
+communication between devices until the results are gathered. That is how a
+sweep uses several CPU devices, a GPU, or every device of several hosts
+started with ``jax.distributed.initialize()``.
 """
 
 from __future__ import annotations
 
+import functools
 import time
+from collections.abc import Iterator, Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._simulate import (
     DTYPES,
@@ -27,29 +39,193 @@ from ._simulate import (
     _n_steps,
     _prepare_and_init_raw,
     _prepend_initial,
-    _run_chunk,
+    chunk_length,
     precision,
     validate_initial_state,
     validate_model,
     validate_scheme,
 )
-from .integrators.base import AbstractScheme
+from .integrators.base import AbstractScheme, StepOutput
 from .models.base import Model
 from .results import ConfigError, Result
 
+MEMBERS = "members"
+"""Name of the mesh axis the members are split over."""
 
-def _run_chunk_batch(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
-    return jax.vmap(
-        lambda o, c, hh, n: _run_chunk(model, scheme, o, c, hh, n, stop_on_failure, length)
-    )(ops, carry, h, n_steps)
-
-
-_run_chunk_batch_jit = eqx.filter_jit(_run_chunk_batch)
+RECORD_BUDGET = 2**22
+"""Recorded numbers per batched chunk (32 MiB in float64): the chunk length of
+a batch is the single-run length divided by the batch size, within [16, 4096]."""
 
 
-@eqx.filter_jit
-def _prepare_and_init_batch(model, scheme, t0, q0, v0, hs):
-    return jax.vmap(lambda h: _prepare_and_init_raw(model, scheme, t0, q0, v0, h))(hs)
+def member_mesh(devices: Sequence[jax.Device] | None = None) -> Mesh:
+    """A one-axis mesh over ``devices`` (default: every device of every process)."""
+    devices = jax.devices() if devices is None else list(devices)
+    return Mesh(np.asarray(devices), (MEMBERS,))
+
+
+def stack_models(models: Sequence[Model]) -> Model:
+    """One model whose array leaves stack the members' leaves (leading axis).
+
+    Raises :class:`ConfigError` when the members differ in static structure
+    (an element count, a mass-matrix kind): those cannot share a compilation.
+    """
+    parts = [eqx.partition(m, eqx.is_array) for m in models]
+    static = parts[0][1]
+    for i, (_, s) in enumerate(parts[1:], start=1):
+        if jax.tree_util.tree_structure(s) != jax.tree_util.tree_structure(static) or not eqx.tree_equal(s, static):
+            raise ConfigError(f"batch member {i} differs in structure from member 0 (sizes, element kinds "
+                              "or other static fields); run such members in separate batches")
+    dynamic = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *[d for d, _ in parts])
+    return eqx.combine(dynamic, static)
+
+
+def broadcast_members(tree, n: int):
+    """Every array leaf of ``tree`` repeated along a new leading axis of length n."""
+    return jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n, *jnp.shape(x))) if eqx.is_array(x) else x, tree)
+
+
+def batch_chunk_length(model: Model, n_members: int) -> int:
+    """Steps per compiled chunk of a batch: a power of two in [16, 4096] keeping
+    about :data:`RECORD_BUDGET` recorded numbers per chunk."""
+    fit = RECORD_BUDGET // (n_members * (2 * model.n_dof + 16))
+    return int(min(chunk_length(model), max(16, 2 ** int(np.floor(np.log2(max(fit, 1)))))))
+
+
+def _on_devices(fn, mesh: Mesh | None):
+    """``fn`` (which takes member-batched arguments) split over the mesh's
+    devices by ``shard_map`` when a mesh is given: each device runs its own
+    members, with no communication until the results are gathered."""
+    if mesh is None:
+        return fn
+    spec = PartitionSpec(MEMBERS)
+    return jax.shard_map(fn, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+
+
+def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
+    """Up to ``length`` steps of every member (leading axis of every argument).
+
+    The loop runs over steps with the step ``vmap``-ed inside it, not the other
+    way round: its trip count and the record index are then shared by all
+    members (a ``while_loop`` under ``vmap`` would carry, and select, the whole
+    record buffer at every step). A member past its ``n_steps`` keeps its state.
+    Records come out as (B, length, ...) with the mask of steps taken (B, length).
+    """
+    state, k, stopped = carry
+    step = jax.vmap(lambda m, s, o, st, hh: s.step(m, o, st, hh))
+    template = jax.eval_shape(lambda st: step(model, scheme, ops, st, h)[1], state)
+    buffer = jax.tree_util.tree_map(lambda s: jnp.zeros((length, *s.shape), s.dtype), template)
+    mask = jnp.zeros((length, len(h)), bool)
+
+    def going(c):
+        i, _, k, stopped, _, _ = c
+        return (i < length) & jnp.any((k < n_steps) & ~stopped)
+
+    def body(c):
+        i, state, k, stopped, buffer, mask = c
+        do = (k < n_steps) & ~stopped
+        new_state, out = step(model, scheme, ops, state, h)
+        state = jax.tree_util.tree_map(
+            lambda a, b: jnp.where(do.reshape(-1, *([1] * (a.ndim - 1))), a, b), new_state, state)
+        buffer = jax.tree_util.tree_map(lambda b, o: lax.dynamic_update_index_in_dim(b, o, i, 0), buffer, out)
+        mask = lax.dynamic_update_index_in_dim(mask, do, i, 0)
+        return i + 1, state, k + do.astype(k.dtype), stopped, buffer, mask
+
+    init = (jnp.zeros((), jnp.int32), state, k, stopped, buffer, mask)
+    _, state, k, stopped, buffer, mask = lax.while_loop(going, body, init)
+    records = jax.tree_util.tree_map(lambda b: jnp.swapaxes(b, 0, 1), buffer)
+    return (state, k, stopped), (records, mask.T)
+
+
+@functools.cache
+def _compiled_steps(length: int, mesh: Mesh | None):
+    prepare = eqx.filter_jit(_on_devices(_prepare_members, mesh))
+    run = functools.partial(_run_members, length=length)
+    return prepare, eqx.filter_jit(_on_devices(run, mesh))
+
+
+def _prepare_members(*members):
+    """Constant operators and initial carry of each member, one member after
+    the other (``lax.map``): it runs once per batch, and batched LU
+    factorisations running side by side can deadlock XLA's CPU thread pool
+    (jaxlib 0.10, several host devices)."""
+
+    def one(args):
+        ops, state = _prepare_and_init_raw(*args)
+        return ops, (state, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
+
+    return lax.map(one, members)
+
+
+def _place(tree, mesh: Mesh | None):
+    """Array leaves as global arrays split over the mesh's member axis (each
+    process supplies its own devices' slices, so this works across hosts)."""
+    if mesh is None:
+        return tree
+    sharding = NamedSharding(mesh, PartitionSpec(MEMBERS))
+
+    def place(x):
+        if not eqx.is_array(x):
+            return x
+        x = np.asarray(x)
+        return jax.make_array_from_callback(x.shape, sharding, lambda index: x[index])
+
+    return jax.tree_util.tree_map(place, tree)
+
+
+def _to_host(tree):
+    """NumPy copies of (possibly multi-host) arrays, whole on every process."""
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        tree = multihost_utils.process_allgather(tree, tiled=True)
+    return jax.device_get(tree)
+
+
+class BatchRun:
+    """The compiled batched time loop over a fixed set of members.
+
+    ``chunks()`` yields ``(records, done)`` per chunk of steps: NumPy
+    :class:`StepOutput` with leaves of shape (B, L, ...) and the mask (B, L) of
+    the steps each member took. ``compile_time`` and ``wall_time`` [s] are
+    those of the whole batch (wall time: preparation and chunks until their
+    results are ready, not the copies to the host).
+    """
+
+    def __init__(self, model: Model, scheme: AbstractScheme, t0, q0, v0, hs, n_steps, *,
+                 mesh: Mesh | None = None, length: int | None = None):
+        B = len(hs)
+        if mesh is not None and B % mesh.size:
+            raise ConfigError(f"the batch ({B} members) must be a multiple of the mesh's {mesh.size} devices")
+        self.n_members = B
+        self.longest = int(np.max(n_steps))
+        self.length = length or batch_chunk_length(model, B)
+        prepare, self._run = _compiled_steps(self.length, mesh)
+        every = broadcast_members(scheme, B)
+        args = _place((model, every, np.full(B, t0), np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
+        tc = time.perf_counter()
+        prepare = prepare.lower(*args).compile()
+        self.compile_time = time.perf_counter() - tc
+        tw = time.perf_counter()
+        self._ops, self._carry = prepare(*args)
+        jax.block_until_ready(self._carry)
+        self.wall_time = time.perf_counter() - tw
+        self._args = (args[0], args[1])
+        self._consts = _place((np.asarray(hs), np.asarray(n_steps, dtype=np.int32)), mesh)
+        tc = time.perf_counter()
+        self._run = self._run.lower(*self._args, self._ops, self._carry, *self._consts).compile()
+        self.compile_time += time.perf_counter() - tc
+
+    @property
+    def n_chunks(self) -> int:
+        return -(-self.longest // self.length)
+
+    def chunks(self) -> Iterator[tuple[StepOutput, np.ndarray]]:
+        for _ in range(self.n_chunks):
+            tw = time.perf_counter()
+            self._carry, (out, done) = self._run(*self._args, self._ops, self._carry, *self._consts)
+            jax.block_until_ready((self._carry, out, done))
+            self.wall_time += time.perf_counter() - tw
+            yield _to_host((out, done))
 
 
 def simulate_batch(
@@ -61,16 +237,18 @@ def simulate_batch(
     q0,
     v0,
     *,
-    chunk_size: int = 4096,
     observe: Observe | None = None,
     dtype: str = "float64",
+    mesh: Mesh | None = None,
 ) -> list[Solution]:
     """Integrate one problem with every step size in ``hs`` at once (``vmap``).
 
     Failures never stop the batch (one bad member must not kill a sweep): each
     member's records carry its result codes and ``Solution.result`` its first
     failure. ``wall_time`` and ``compile_time`` are those of the whole batch.
-    ``dtype`` is the precision, as in :func:`~nsga_jax.simulate`.
+    ``dtype`` is the precision, as in :func:`~nsga_jax.simulate`; ``mesh``
+    splits the members over devices (:func:`member_mesh`; the number of step
+    sizes must then be a multiple of the mesh size).
     """
     validate_scheme(scheme)
     validate_model(model)
@@ -85,60 +263,32 @@ def simulate_batch(
     validate_initial_state(model, q0, v0)
     if dtype not in DTYPES:
         raise ConfigError(f"dtype must be one of {', '.join(map(repr, DTYPES))}, got {dtype!r}")
+    B = len(hs)
+    n_steps = np.array([_n_steps(t0, t1, h) for h in hs])
     with precision(dtype):
-        solutions = _integrate_batch(*_cast((model, scheme), dtype), t0, t1, hs, q0.astype(dtype),
-                                     v0.astype(dtype), chunk_size)
+        model_c, scheme_c = _cast((model, scheme), dtype)
+        run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),
+                       np.tile(v0.astype(dtype), (B, 1)), hs.astype(dtype), n_steps, mesh=mesh)
+        chunks: list[list[StepOutput]] = [[] for _ in range(B)]
+        for out, done in run.chunks():
+            for b in range(B):
+                if done[b].any():
+                    chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
+    solutions = []
+    for b in range(B):
+        records = _prepend_initial(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype))
+        codes = np.asarray(records.result)
+        bad = np.nonzero(codes != Result.successful)[0]
+        solutions.append(Solution(
+            ts=np.asarray(records.t), q=np.asarray(records.q), v=np.asarray(records.v), records=records,
+            h=float(hs[b]), n_steps=len(records.t) - 1, n_steps_requested=int(n_steps[b]),
+            result=Result(int(codes[bad[0]])) if bad.size else Result.successful,
+            wall_time=run.wall_time, compile_time=run.compile_time,
+        ))
     if observe is not None:
         for sol in solutions:
             sol.observables = {k: np.asarray(v) for k, v in observe(_float64_view(sol)).items()}
     return solutions
 
 
-def _integrate_batch(model, scheme, t0, t1, hs, q0, v0, chunk_size) -> list[Solution]:
-    """The batched loop of :func:`simulate_batch` on validated arguments, in the
-    precision already set by the caller."""
-    n_steps = np.array([_n_steps(t0, t1, h) for h in hs])
-    longest = int(n_steps.max())
-    n_chunks = -(-longest // chunk_size)
-    length = -(-longest // n_chunks)
-    B = len(hs)
-
-    args0 = (model, scheme, jnp.asarray(t0), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(hs))
-    tc = time.perf_counter()
-    prep = _prepare_and_init_batch.lower(*args0).compile()
-    compile_time = time.perf_counter() - tc
-    tw = time.perf_counter()
-    ops, state = prep(*args0)
-    jax.block_until_ready(state)
-    wall = time.perf_counter() - tw
-
-    carry = (state, jnp.zeros((B,), jnp.int32), jnp.zeros((B,), bool))
-    consts = (jnp.asarray(hs), jnp.asarray(n_steps), jnp.asarray(False))
-    tc = time.perf_counter()
-    run = _run_chunk_batch_jit.lower(model, scheme, ops, carry, *consts, length).compile()
-    compile_time += time.perf_counter() - tc
-
-    chunks: list[list] = [[] for _ in range(B)]
-    for _ in range(n_chunks):
-        tw = time.perf_counter()
-        carry, (out, done) = run(model, scheme, ops, carry, *consts, length)
-        jax.block_until_ready((carry, out, done))
-        wall += time.perf_counter() - tw
-        out, done = jax.device_get((out, done))
-        for b in range(B):
-            if done[b].any():
-                chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
-
-    solutions = []
-    for b in range(B):
-        records = _prepend_initial(model, chunks[b], t0, q0, v0)
-        codes = np.asarray(records.result)
-        bad = np.nonzero(codes != Result.successful)[0]
-        sol = Solution(
-            ts=np.asarray(records.t), q=np.asarray(records.q), v=np.asarray(records.v), records=records,
-            h=float(hs[b]), n_steps=len(records.t) - 1, n_steps_requested=int(n_steps[b]),
-            result=Result(int(codes[bad[0]])) if bad.size else Result.successful,
-            wall_time=wall, compile_time=compile_time,
-        )
-        solutions.append(sol)
-    return solutions
+__all__ = ["BatchRun", "broadcast_members", "member_mesh", "simulate_batch", "stack_models"]
