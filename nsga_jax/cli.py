@@ -1,4 +1,4 @@
-"""Command-line interface: ``nsga-jax run | convergence | identify | scenes | config``."""
+"""Command-line interface: ``nsga-jax run | convergence | sweep | bench | identify | scenes | config``."""
 
 from __future__ import annotations
 
@@ -76,6 +76,33 @@ def _parser() -> argparse.ArgumentParser:
     ident.add_argument("--t-end", type=float, help="--synthetic: end time [s]")
     ident.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
     ident.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_identify)")
+
+    sw = sub.add_parser("sweep", help="run a scene for every combination of parameter values and step sizes "
+                                      "(batched, split over every device, resumable)")
+    sw.add_argument("scene", help="scene name or .toml config")
+    sw.add_argument("--grid", required=True,
+                    help="swept float parameters, e.g. 'e=0:1:11,E=800:1000:5' (start:stop:count) or 'e=0.2;0.5'")
+    sw.add_argument("--h", help="comma-separated step sizes [s] (default: the scene's)")
+    sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="fixed config value for every run (repeatable)")
+    sw.add_argument("--batch-size", type=int, help="runs per compiled batch (default: from the model's size)")
+    sw.add_argument("--devices", type=int, help="use the first N devices (default: all)")
+    sw.add_argument("--max-records", type=int, default=2000,
+                    help="recorded steps kept per run for observables and errors (default 2000)")
+    sw.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_sweep); "
+                                             "run again to resume an interrupted sweep")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    bn = sub.add_parser("bench", help="time per step, batched throughput, compile time, float32 vs float64")
+    bn.add_argument("--scenes", help="comma-separated scenes (default: all)")
+    bn.add_argument("--batch", default="1,64,1024", help="comma-separated batch sizes (default 1,64,1024)")
+    bn.add_argument("--dtype", default="float64,float32", help="comma-separated precisions")
+    bn.add_argument("--scheme", choices=("ds", "dsn", "cs", "mj"), default="ds")
+    bn.add_argument("--repeats", type=int, default=3, help="runs per configuration; the fastest counts")
+    bn.add_argument("--max-steps", type=int, default=2000, help="steps per run at most (default 2000)")
+    bn.add_argument("--max-seconds", type=float, default=60.0,
+                    help="skip a batch whose estimated run time exceeds this (default 60 s)")
+    bn.add_argument("--out", type=Path, default=Path("nsga_out/bench"), help="output folder (bench.csv, bench.md)")
 
     sub.add_parser("scenes", help="list the built-in scenes and their parameters")
     cfg = sub.add_parser("config", help="print a scene's default TOML config")
@@ -222,6 +249,43 @@ def _identify(args) -> int:
     return 0
 
 
+def _sweep(args) -> int:
+    import jax
+
+    from .sweep import parse_grid, sweep
+
+    grid = parse_grid(args.grid)
+    hs = None if args.h is None else [float(x) for x in args.h.split(",")]
+    devices = jax.devices() if args.devices is None else jax.devices()[: args.devices]
+    if args.devices is not None and not 1 <= args.devices <= len(jax.devices()):
+        raise ConfigError(f"--devices must be in [1, {len(jax.devices())}], got {args.devices}")
+    out = args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep"
+    result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
+                   batch_size=args.batch_size, devices=devices, max_records=args.max_records,
+                   progress=not args.quiet)
+    print(f"{len(result.rows)} runs on {len(devices)} device(s); compile {result.compile_time:.1f} s, "
+          f"runs {result.wall_time:.2f} s (this session's batches)")
+    print(f"wrote {result.path} and {result.plot}")
+    return 0
+
+
+def _bench(args) -> int:
+    from .bench import bench, markdown
+
+    scenes = None if args.scenes is None else args.scenes.split(",")
+    try:
+        batches = [int(b) for b in args.batch.split(",")]
+    except ValueError:
+        raise ConfigError(f"--batch expects comma-separated integers, got {args.batch!r}") from None
+    rows = bench(scenes, batches, args.dtype.split(","), scheme=args.scheme, repeats=args.repeats,
+                 max_steps=args.max_steps, max_seconds=args.max_seconds, out=args.out)
+    table = markdown(rows)
+    (args.out / "bench.md").write_text(table + "\n")
+    print(table)
+    print(f"wrote {args.out / 'bench.csv'} and {args.out / 'bench.md'}")
+    return 0
+
+
 def _scenes() -> int:
     for name, spec in sorted(REGISTRY.items()):
         print(f"{name}: {spec.description}")
@@ -241,6 +305,10 @@ def main(argv: list[str] | None = None) -> int:
             return _convergence(args)
         if args.command == "identify":
             return _identify(args)
+        if args.command == "sweep":
+            return _sweep(args)
+        if args.command == "bench":
+            return _bench(args)
         if args.command == "scenes":
             return _scenes()
         if args.command == "config":

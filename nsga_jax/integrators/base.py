@@ -10,6 +10,7 @@ impulse Λ [N s] (Λ/h is the mean contact force over the step).
 from __future__ import annotations
 
 import abc
+import dataclasses
 from collections.abc import Callable
 
 import equinox as eqx
@@ -114,6 +115,7 @@ def constant_operators(
     smooth_needs_constant_G: bool,
     position_needs_constant_G: bool,
     velocity_needs_constant_G: bool = False,
+    enabled: bool = True,
 ) -> Operators:
     """Evaluate what the model's structure makes constant and invert the given
     iteration matrices when they are constant.
@@ -121,7 +123,11 @@ def constant_operators(
     The smooth block couples only to the bilateral rows of g_q, the others to
     all rows. ``*_needs_constant_G``: the matrix holds the constraint
     curvature unless the constraints are affine, so it is constant only then.
+    ``enabled=False`` keeps nothing (every field ``None``): the generic path,
+    which evaluates and factors everything at every iteration.
     """
+    if not enabled:
+        return Operators(*([None] * len(dataclasses.fields(Operators))))
     n, nb, nc = model.n_dof, model.n_bilateral, model.n_constraints
     zeros = jnp.zeros((n,))
     M = model.mass(zeros) if model.constant_mass else None
@@ -334,12 +340,17 @@ class AbstractScheme(eqx.Module):
         differentiable: make each Newton solve differentiable by the implicit
             function theorem (:func:`~nsga_jax.integrators.newton.solve`); set by
             :func:`~nsga_jax.trajectory`. Static.
+        fast_paths: use what the model's static structure makes constant
+            (mass, tangents, constraint Jacobian, inverted iteration matrices),
+            computed once per run; ``False`` is the generic path, for checks
+            and benchmarks. Static.
     """
 
     tol_r: ScalarLike = eqx.field(default=1e-5, converter=as_float)
     tol_f: ScalarLike = eqx.field(default=1e-5, converter=as_float)
     max_iter: int = eqx.field(static=True, default=50)
     differentiable: bool = eqx.field(static=True, default=False, kw_only=True)
+    fast_paths: bool = eqx.field(static=True, default=True, kw_only=True)
 
     name = "abstract"
 

@@ -73,6 +73,7 @@ class CS(AbstractGenAlpha):
             velocity=lambda M, K, C: M,
             smooth_needs_constant_G=True,
             position_needs_constant_G=True,
+            enabled=self.fast_paths,
         )
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:

@@ -106,6 +106,7 @@ class DS(AbstractGenAlpha):
             velocity=(lambda M, K, C: M + h * C) if with_forces else (lambda M, K, C: M),  # S_t^{v*}
             smooth_needs_constant_G=True,
             position_needs_constant_G=True,
+            enabled=self.fast_paths,
         )
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:

@@ -66,6 +66,7 @@ class MJ(AbstractScheme):
             model, t0, smooth=None, position=None,
             velocity=lambda M, K, C: M + h * th * C + (h * th) ** 2 * K,
             smooth_needs_constant_G=False, position_needs_constant_G=False, velocity_needs_constant_G=True,
+            enabled=self.fast_paths,
         )
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:

@@ -1,0 +1,202 @@
+"""Benchmarks: ``nsga-jax bench`` and :func:`bench`.
+
+For each scene, precision and batch size, the time per step of complete runs
+(compile time apart, minimum over repeats), the batched throughput (member
+steps per second), the compile time, the linear solves per step, the cost of
+one dense LU factorisation and solve of the scene's n × n matrix (the unit of
+a nonlinear model's Newton iteration), and for float32 the eq. 52 distance of
+its first error observable from the float64 run. Rows go to ``DIR/bench.csv``
+as they are measured, with the device they ran on; the same command runs on a
+CPU or a GPU machine unchanged.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import platform
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._simulate import _cast, _n_steps, precision
+from .batch import BatchRun, broadcast_members
+from .metrics import relative_l1_error
+from .results import ConfigError
+from .scenes.base import REGISTRY, Scene, load_scene
+
+CASES: dict[str, dict] = {
+    "bouncing_ball": {"h": 1e-3},
+    "rigid_pendulum": {"h": 1e-3},
+    "impacting_bar": {"h": 1e-3},
+    "rigid_box": {"h": 1e-3},
+    "flexible_pendulum": {"h": 1e-4},
+    # the paper's cube at its smallest step, started just above the floor at its impact speed
+    "flexible_cube": {"h": 1e-4, "t_end": 0.006, "height": 0.0505, "velocity": -2.43},
+}
+"""Each scene's benchmark configuration (overrides of its defaults)."""
+
+COLUMNS = ("scene", "scheme", "h", "batch", "dtype", "device", "n_dof", "steps", "us_per_step",
+           "member_steps_per_s", "speedup_vs_single", "compile_s", "solves_per_step", "factor_solve_us",
+           "float32_error")
+
+
+def device_name() -> str:
+    d = jax.devices()[0]
+    if d.platform == "cpu":
+        return f"cpu ({platform.machine()}, {os.cpu_count()} cores)"
+    return f"{d.platform} ({d.device_kind})"
+
+
+def per_call(step: Callable, x0, repeats: int, inner: int) -> float:
+    """Seconds per call of ``x -> step(x)``, chained ``inner`` times in one compiled
+    loop (no dispatch overhead; each call depends on the previous one)."""
+    loop = jax.jit(lambda x: jax.lax.fori_loop(0, inner, lambda i, x: step(x), x))
+    jax.block_until_ready(loop(x0))
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(loop(x0))
+        best = min(best, time.perf_counter() - t)
+    return best / inner
+
+
+def factor_solve_seconds(n: int, dtype: str, repeats: int = 3) -> float:
+    """One dense LU factorisation and solve of an n × n system."""
+    with precision(dtype):
+        rng = np.random.default_rng(0)
+        A = jnp.asarray(rng.normal(size=(n, n)) + n * np.eye(n), dtype)
+        tiny = 1e-30
+        inner = max(3, min(2000, int(2e6 / n**2)))
+        return per_call(lambda x: jnp.linalg.solve(A + tiny * x[0], x), jnp.ones(n, dtype), repeats, inner)
+
+
+def _bench_scene(name: str, overrides: dict, max_steps: int) -> Scene:
+    scene = load_scene(name, {**CASES.get(name, {}), **overrides})
+    h = scene.solver["h"]
+    t_end = min(scene.solver["t_end"], max_steps * h)
+    return load_scene(name, {**CASES.get(name, {}), **overrides, "t_end": t_end})
+
+
+def _single(scene: Scene, dtype: str, repeats: int):
+    runs = [scene.run(dtype=dtype, throw=False) for _ in range(repeats)]
+    best = min(r.wall_time for r in runs)
+    return runs[0], best
+
+
+def _batched(scene: Scene, dtype: str, batch: int, repeats: int) -> tuple[float, float]:
+    """(compile time, best wall time) of ``batch`` identical members."""
+    n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
+    with precision(dtype):
+        model, scheme = _cast((scene.model, scene.scheme()), dtype)
+        members = broadcast_members(model, batch)
+        q0 = np.tile(scene.q0.astype(dtype), (batch, 1))
+        v0 = np.tile(scene.v0.astype(dtype), (batch, 1))
+        hs = np.full(batch, scene.solver["h"], dtype)
+        compile_s, best = None, np.inf
+        for _ in range(repeats):
+            run = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, n))
+            for _ in run.chunks():
+                pass
+            compile_s = run.compile_time if compile_s is None else compile_s
+            best = min(best, run.wall_time)
+    return compile_s, best
+
+
+def bench(
+    scenes: Sequence[str] | None = None,
+    batches: Sequence[int] = (1, 64, 1024),
+    dtypes: Sequence[str] = ("float64", "float32"),
+    *,
+    scheme: str = "ds",
+    repeats: int = 3,
+    max_steps: int = 2000,
+    max_seconds: float = 60.0,
+    out: str | Path | None = None,
+    progress: bool = True,
+) -> list[dict]:
+    """Measure every (scene, dtype, batch); see the module docstring.
+
+    A batched configuration whose estimated run time (members × steps × the
+    single run's time per step) exceeds ``max_seconds`` is skipped and said so.
+    Each row is appended to ``out/bench.csv`` as soon as it is measured.
+    """
+    scenes = list(REGISTRY) if scenes is None else list(scenes)
+    for s in scenes:
+        if s not in REGISTRY:
+            raise ConfigError(f"unknown scene {s!r}; built-in scenes: {', '.join(sorted(REGISTRY))}")
+    for b in batches:
+        if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or b < 1:
+            raise ConfigError(f"batch sizes must be integers >= 1, got {b!r}")
+    for d in dtypes:
+        if d not in ("float64", "float32"):
+            raise ConfigError(f"dtype must be 'float64' or 'float32', got {d!r}")
+    path = None
+    if out is not None:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        path = Path(out) / "bench.csv"
+        with open(path, "w", newline="") as f:
+            csv.DictWriter(f, fieldnames=COLUMNS).writeheader()
+    device = device_name()
+    rows = []
+    for name in scenes:
+        scene = _bench_scene(name, {"scheme": scheme}, max_steps)
+        h = scene.solver["h"]
+        reference = None
+        for dtype in dtypes:
+            single, wall = _single(scene, dtype, repeats)
+            steps = single.n_steps
+            single_us = 1e6 * wall / steps
+            error = ""
+            observable = (scene.spec.error_observables or scene.spec.observables)[0]
+            if dtype == "float64":
+                reference = single
+            elif reference is not None:
+                error = relative_l1_error(single.observables[observable], reference.observables[observable])
+            fs = 1e6 * factor_solve_seconds(scene.model.n_dof, dtype)
+            common = {"scene": name, "scheme": scheme, "h": h, "dtype": dtype, "device": device,
+                      "n_dof": scene.model.n_dof, "steps": steps,
+                      "solves_per_step": single.stats["iterations"]["linear_solves"]["mean"],
+                      "factor_solve_us": fs, "float32_error": error}
+            for batch in batches:
+                if batch == 1:
+                    compile_s, us = single.compile_time, single_us
+                elif batch * steps * single_us * 1e-6 > max_seconds:
+                    if progress:
+                        print(f"{name} {dtype} batch {batch}: skipped (about "
+                              f"{batch * steps * single_us * 1e-6:.0f} s at the single run's speed; "
+                              f"--max-seconds {max_seconds:g})", flush=True)
+                    continue
+                else:
+                    compile_s, wall_b = _batched(scene, dtype, batch, repeats)
+                    us = 1e6 * wall_b / steps
+                row = {**common, "batch": batch, "us_per_step": us, "member_steps_per_s": batch * 1e6 / us,
+                       "speedup_vs_single": batch * single_us / us, "compile_s": compile_s}
+                rows.append(row)
+                if path is not None:
+                    with open(path, "a", newline="") as f:
+                        csv.DictWriter(f, fieldnames=COLUMNS).writerow(row)
+                if progress:
+                    print(f"{name} {dtype} batch {batch}: {us:.1f} us/step, {row['member_steps_per_s']:.3g} "
+                          f"member-steps/s ({row['speedup_vs_single']:.1f}x single), compile {compile_s:.1f} s",
+                          flush=True)
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    """The README's table of ``rows``."""
+    lines = ["| scene | n | h [s] | dtype | batch | µs/step | member-steps/s | × single | compile [s] "
+             "| solves/step | dense factor+solve [µs] | float32 − float64 (eq. 52) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        err = r["float32_error"]
+        err = f"{float(err):.1e}" if err not in ("", None) else ""
+        lines.append(f"| {r['scene']} | {r['n_dof']} | {float(r['h']):g} | {r['dtype']} | {r['batch']} | "
+                     f"{float(r['us_per_step']):.1f} | {float(r['member_steps_per_s']):.3g} | "
+                     f"{float(r['speedup_vs_single']):.1f} | {float(r['compile_s']):.1f} | "
+                     f"{float(r['solves_per_step']):.2f} | {float(r['factor_solve_us']):.1f} | {err} |")
+    return "\n".join(lines)

@@ -1,0 +1,443 @@
+"""Parameter and step-size sweeps of a scene: :func:`sweep` and ``nsga-jax sweep``.
+
+The members of a sweep are every combination of the swept values (float scene
+parameters, and step sizes). They share the scene's structure, so they run in
+batches through one compiled program (:class:`~nsga_jax.batch.BatchRun`:
+``vmap``, split over every device by ``shard_map`` when there are several).
+Each finished batch is written at once to ``DIR/batches/batch_XXXXX.csv``;
+a sweep started again in the same directory skips the batches already there,
+so an interrupted sweep resumes where it stopped and loses nothing already
+computed. At the end ``DIR/sweep.csv`` holds one row per member (in grid
+order) and ``DIR/sweep.png`` plots the main columns against the swept values.
+
+Each row has the member's parameters and h, what the scheme did (steps,
+result, failed steps, linear solves per step, largest penetration and
+bilateral violations, over every step), the final value, minimum and maximum
+of each scalar observable, and, where the scene has an exact solution, the
+eq. 52 error of its observables (on the recorded steps, at most
+``max_records`` per member).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from ._simulate import RunTotals, Solution, _cast, _float64_view, _n_steps, _prepend_initial, precision
+from .batch import BatchRun, member_mesh, stack_models
+from .metrics import relative_l1_error
+from .results import ConfigError, Result
+from .scenes.base import Scene, load_scene
+
+MEMORY_BUDGET = 2**25
+"""Recorded numbers a batch keeps in memory (256 MiB in float64); the default
+batch size follows from it and the model's size."""
+
+PROCESS_COLUMNS = ("n_steps", "result", "failed_steps", "solves_per_step_mean", "solves_per_step_max",
+                   "max_penetration", "max_bilateral_violation", "max_bilateral_rate_violation")
+
+
+# ----------------------------------------------------------------- the grid
+
+
+def parse_values(name: str, text: str) -> np.ndarray:
+    """``"a:b:n"`` (n values from a to b), ``"a;b;c"`` (a list) or ``"a"``."""
+    text = text.strip()
+    try:
+        if ":" in text:
+            parts = text.split(":")
+            if len(parts) != 3:
+                raise ValueError
+            a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
+            if n < 1:
+                raise ValueError
+            return np.linspace(a, b, n)
+        return np.asarray([float(x) for x in text.split(";")])
+    except ValueError:
+        raise ConfigError(f"sweep values of {name!r} must be 'start:stop:count', 'a;b;c' or one number, "
+                          f"got {text!r}") from None
+
+
+def parse_grid(text: str) -> dict[str, np.ndarray]:
+    """``"e=0:1:11,E=800:1000:5"`` -> ``{"e": 11 values, "E": 5 values}``."""
+    grid: dict[str, np.ndarray] = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        if "=" not in item:
+            raise ConfigError(f"--grid expects name=values items separated by commas, got {item!r}")
+        name, values = (s.strip() for s in item.split("=", 1))
+        if name in grid:
+            raise ConfigError(f"{name!r} appears twice in the grid")
+        grid[name] = parse_values(name, values)
+    if not grid:
+        raise ConfigError("the grid is empty")
+    return grid
+
+
+@dataclass
+class Member:
+    """One run of a sweep: its swept values (with h) and its built scene."""
+
+    index: int
+    values: dict[str, float]
+    scene: Scene
+
+
+def members(scene: str | Path, grid: dict[str, Sequence[float]], hs: Sequence[float] | None,
+            overrides: dict[str, Any] | None) -> list[Member]:
+    """Every combination of the grid's values and of the step sizes, each
+    validated and built (bad values raise :class:`ConfigError` before anything
+    is compiled)."""
+    base = load_scene(scene, overrides)
+    grid = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in grid.items()}
+    if "h" in grid:
+        if hs is not None:
+            raise ConfigError("give the step sizes either in the grid or as hs, not both")
+        hs = grid.pop("h")
+    floats = [k for k, p in base.spec.parameters.items() if p.kind == "float"]
+    for k in grid:
+        if k not in floats:
+            kind = "a structural parameter" if k in base.spec.parameters else "not a parameter"
+            raise ConfigError(f"cannot sweep {k!r} of {base.name}: {kind}; sweepable: {', '.join(floats + ['h'])} "
+                              "(set structural parameters with overrides, one sweep per value)")
+    hs = [base.solver["h"]] if hs is None else [float(h) for h in np.atleast_1d(hs)]
+    keys = list(grid)
+    out = []
+    for i, combo in enumerate(itertools.product(*(grid[k] for k in keys), hs)):
+        values = {k: float(v) for k, v in zip(keys, combo[:-1])}
+        values["h"] = float(combo[-1])
+        out.append(Member(i, values, load_scene(scene, {**(overrides or {}), **values})))
+    return out
+
+
+def default_batch_size(n_dof: int, max_records: int, n_devices: int) -> int:
+    """Members per batch: a power of two (at least the device count, at most
+    1024) keeping about :data:`MEMORY_BUDGET` recorded numbers."""
+    fit = MEMORY_BUDGET // (max_records * (2 * n_dof + 16))
+    size = 2 ** int(math.floor(math.log2(max(fit, 1))))
+    return int(max(n_devices, min(1024, size)))
+
+
+# ------------------------------------------------------------------- result
+
+
+@dataclass
+class SweepResult:
+    """The sweep's table (one dict per member, in grid order) and its files."""
+
+    rows: list[dict[str, Any]]
+    swept: list[str]
+    path: Path | None = None
+    plot: Path | None = None
+    compile_time: float = 0.0
+    wall_time: float = 0.0
+    files: list[Path] = field(default_factory=list)
+
+    def column(self, name: str) -> np.ndarray:
+        return np.asarray([r[name] for r in self.rows])
+
+
+# -------------------------------------------------------------------- runs
+
+
+def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tuple[list[dict], float, float]:
+    """Run one batch of members (padded with copies of the last one to
+    ``padded`` members) and summarise each real member in a row."""
+    scenes = [m.scene for m in batch] + [batch[-1].scene] * (padded - len(batch))
+    first = scenes[0]
+    t_end = first.solver["t_end"]
+    hs = np.asarray([s.solver["h"] for s in scenes])
+    n_steps = np.asarray([_n_steps(0.0, t_end, h) for h in hs])
+    every = np.maximum(1, -(-n_steps // max_records))  # per member: at most max_records kept
+    with precision(first.solver["dtype"]):
+        dtype = first.solver["dtype"]
+        model = stack_models([s.model for s in scenes])
+        model, scheme = _cast((model, first.scheme()), dtype)
+        q0 = np.stack([s.q0 for s in scenes]).astype(dtype)
+        v0 = np.stack([s.v0 for s in scenes]).astype(dtype)
+        run = BatchRun(model, scheme, 0.0, q0, v0, hs.astype(dtype), n_steps, mesh=mesh)
+        totals = _BatchTotals(len(scenes))
+        kept, masks = [], []
+        start = 0
+        for out, done in run.chunks():
+            step = start + 1 + np.arange(done.shape[1])
+            keep = done & ((step[None, :] % every[:, None] == 0) | (step[None, :] == n_steps[:, None]))
+            cols = keep.any(axis=0)
+            kept.append(jax.tree_util.tree_map(lambda x: x[:, cols], out))
+            masks.append(keep[:, cols])
+            totals.add(out, done, step)
+            start += done.shape[1]
+    records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept)
+    mask = np.concatenate(masks, axis=1)
+    rows = []
+    for b, member in enumerate(batch):
+        scene = member.scene
+        mine = jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)
+        recs = _prepend_initial(scene.model, [mine], 0.0, scene.q0.astype(dtype), scene.v0.astype(dtype))
+        sol = Solution(ts=np.asarray(recs.t), q=np.asarray(recs.q), v=np.asarray(recs.v), records=recs,
+                       h=float(hs[b]), n_steps=int(totals.steps[b]), n_steps_requested=int(n_steps[b]),
+                       result=Result(int(totals.first_failure[b])), wall_time=run.wall_time,
+                       compile_time=run.compile_time, totals=totals.member(b))
+        rows.append(_row(member, sol))
+    return rows, run.compile_time, run.wall_time
+
+
+class _BatchTotals:
+    """:class:`~nsga_jax._simulate.RunTotals` of every member of a batch at once."""
+
+    def __init__(self, B: int):
+        self.steps = np.zeros(B, int)
+        self.it_sum = np.zeros((B, 3))
+        self.it_max = np.zeros((B, 3), int)
+        self.solves_sum = np.zeros(B)
+        self.solves_max = np.zeros(B, int)
+        self.failed: list[list[int]] = [[] for _ in range(B)]
+        self.first_failure = np.zeros(B, int)
+        self.min_gap = np.full(B, np.inf)
+        self.max_bilateral = np.zeros(B)
+        self.max_bilateral_rate = np.zeros(B)
+
+    def add(self, out, done: np.ndarray, step: np.ndarray) -> None:
+        it = np.where(done[..., None], np.asarray(out.iterations), 0)
+        self.steps += done.sum(axis=1)
+        self.it_sum += it.sum(axis=1)
+        self.it_max = np.maximum(self.it_max, it.max(axis=1))
+        solves = it.sum(axis=2)
+        self.solves_sum += solves.sum(axis=1)
+        self.solves_max = np.maximum(self.solves_max, solves.max(axis=1))
+        result = np.asarray(out.result)
+        bad = done & (result != Result.successful)
+        for b in np.nonzero(bad.any(axis=1))[0]:
+            if not self.failed[b]:
+                self.first_failure[b] = int(result[b][bad[b]][0])
+            self.failed[b].extend(step[bad[b]].tolist())
+
+        def masked(x, fill, reduce):
+            x = np.asarray(x)
+            if x.shape[-1] == 0:
+                return np.full(len(done), fill)
+            return reduce(np.where(done[..., None], x, fill), axis=(1, 2))
+
+        self.min_gap = np.minimum(self.min_gap, masked(out.gap, np.inf, np.min))
+        self.max_bilateral = np.maximum(self.max_bilateral, masked(np.abs(out.bilateral), 0.0, np.max))
+        self.max_bilateral_rate = np.maximum(self.max_bilateral_rate, masked(np.abs(out.bilateral_rate), 0.0, np.max))
+
+    def member(self, b: int) -> RunTotals:
+        return RunTotals(n_steps=int(self.steps[b]), iterations_sum=self.it_sum[b], iterations_max=self.it_max[b],
+                         solves_sum=float(self.solves_sum[b]), solves_max=int(self.solves_max[b]),
+                         failed=self.failed[b], min_gap=float(self.min_gap[b]),
+                         max_bilateral=float(self.max_bilateral[b]),
+                         max_bilateral_rate=float(self.max_bilateral_rate[b]))
+
+
+def _row(member: Member, sol: Solution) -> dict[str, Any]:
+    scene = member.scene
+    st = sol.stats
+    row: dict[str, Any] = {"member": member.index, **member.values}
+    row.update({
+        "n_steps": st["n_steps"], "result": st["result"], "failed_steps": st["failed_steps"],
+        "solves_per_step_mean": st["iterations"]["linear_solves"]["mean"],
+        "solves_per_step_max": st["iterations"]["linear_solves"]["max"],
+        "max_penetration": st["max_penetration"],
+        "max_bilateral_violation": st["max_bilateral_violation_position"],
+        "max_bilateral_rate_violation": st["max_bilateral_violation_velocity"],
+    })
+    view = _float64_view(sol)
+    obs = {k: np.asarray(v) for k, v in scene.observe(view).items()}
+    for name, y in obs.items():
+        if y.ndim != 1:
+            continue
+        row[f"{name}_final"], row[f"{name}_min"], row[f"{name}_max"] = float(y[-1]), float(y.min()), float(y.max())
+    if scene.exact is not None:
+        exact = scene.exact(view.ts)
+        for name in scene.spec.error_observables:
+            if name in exact and name in obs:
+                row[f"error_{name}"] = relative_l1_error(obs[name], exact[name])
+    return row
+
+
+# ------------------------------------------------------------------ the sweep
+
+
+def sweep(
+    scene: str | Path,
+    grid: dict[str, Sequence[float]],
+    *,
+    hs: Sequence[float] | None = None,
+    overrides: dict[str, Any] | None = None,
+    out: str | Path | None = None,
+    batch_size: int | None = None,
+    devices: Sequence[jax.Device] | None = None,
+    max_records: int = 2000,
+    progress: bool = False,
+    on_batch: Callable[[int, list[dict]], None] | None = None,
+) -> SweepResult:
+    """Run ``scene`` for every combination of the ``grid``'s values (and of ``hs``).
+
+    Args:
+        scene: a built-in scene name or a TOML config.
+        grid: ``{parameter: values}`` over float scene parameters (``"h"`` too).
+        hs: step sizes [s] (default: the scene's h).
+        overrides: fixed config values for every member.
+        out: directory of the batch files, the table and the plot; a sweep
+            started again there resumes (the directory must hold the same sweep).
+        batch_size: members per compiled batch (default: from the model's size,
+            :func:`default_batch_size`); rounded up to a multiple of the devices.
+        devices: the devices the members are split over (default: all of them;
+            one device means no sharding).
+        max_records: recorded steps kept per member for observables and errors.
+        progress: a progress bar over batches on stderr.
+        on_batch: called as ``on_batch(k, rows)`` after batch k is written.
+    """
+    mems = members(scene, grid, hs, overrides)
+    swept = [k for k in mems[0].values]
+    devices = jax.devices() if devices is None else list(devices)
+    mesh = member_mesh(devices) if len(devices) > 1 else None
+    n_dev = len(devices)
+    if batch_size is None:
+        batch_size = default_batch_size(mems[0].scene.model.n_dof, max_records, n_dev)
+    if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) or batch_size < 1:
+        raise ConfigError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+    batch_size = min(int(batch_size), len(mems))
+    padded = -(-batch_size // n_dev) * n_dev
+    n_batches = -(-len(mems) // batch_size)
+
+    out_dir = None if out is None else Path(out)
+    if out_dir is not None:
+        _claim(out_dir, scene, grid, hs, overrides, batch_size, len(mems))
+    result = SweepResult(rows=[], swept=swept)
+    t_start = time.perf_counter()
+    for k in range(n_batches):
+        batch = mems[k * batch_size:(k + 1) * batch_size]
+        path = None if out_dir is None else out_dir / "batches" / f"batch_{k:05d}.csv"
+        if path is not None and path.exists():
+            rows = _read_csv(path)
+        else:
+            rows, compile_time, wall = _batch_rows(batch, padded, mesh, max_records)
+            result.compile_time += compile_time
+            result.wall_time += wall
+            for r in rows:
+                r["batch"], r["batch_wall_s"] = k, wall
+            if path is not None and jax.process_index() == 0:
+                _write_csv(path, rows)
+            if on_batch is not None:
+                on_batch(k, rows)
+        result.rows.extend(rows)
+        if progress:
+            _progress(k + 1, n_batches, len(result.rows), len(mems), time.perf_counter() - t_start)
+    if out_dir is not None and jax.process_index() == 0:
+        result.path = out_dir / "sweep.csv"
+        _write_csv(result.path, result.rows)
+        result.plot = plot_sweep(result, out_dir / "sweep.png")
+    return result
+
+
+def _claim(out_dir: Path, scene, grid, hs, overrides, batch_size: int, n: int) -> None:
+    """Write ``DIR/sweep.json`` describing the sweep, or check that the one
+    there describes the same sweep (else resuming would mix two sweeps)."""
+    spec = {"scene": str(scene), "grid": {k: [float(x) for x in np.atleast_1d(v)] for k, v in grid.items()},
+            "hs": None if hs is None else [float(h) for h in np.atleast_1d(hs)],
+            "overrides": {k: v for k, v in (overrides or {}).items()}, "batch_size": batch_size, "members": n}
+    manifest = out_dir / "sweep.json"
+    if manifest.exists():
+        old = json.loads(manifest.read_text())
+        if old != json.loads(json.dumps(spec)):
+            raise ConfigError(f"{out_dir} holds another sweep ({manifest}); use another directory or remove it")
+        return
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "batches").mkdir(exist_ok=True)
+    manifest.write_text(json.dumps(spec, indent=2) + "\n")
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    columns: list[str] = []
+    for r in rows:
+        columns += [c for c in r if c not in columns]
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        w.writerows(rows)
+    tmp.replace(path)
+
+
+def _read_csv(path: Path) -> list[dict]:
+    def value(text: str):
+        try:
+            x = float(text)
+        except ValueError:
+            return text
+        return int(x) if x.is_integer() and "." not in text and "e" not in text.lower() else x
+
+    with open(path, newline="") as f:
+        return [{k: value(v) for k, v in r.items()} for r in csv.DictReader(f)]
+
+
+def _progress(done: int, total: int, members_done: int, members: int, elapsed: float) -> None:
+    width = 30
+    filled = int(width * done / total)
+    eta = elapsed / done * (total - done)
+    print(f"\r  [{'#' * filled}{'.' * (width - filled)}] batch {done}/{total}, {members_done}/{members} runs, "
+          f"{elapsed:.0f} s, about {eta:.0f} s left", end="\n" if done == total else "", file=sys.stderr, flush=True)
+
+
+# -------------------------------------------------------------------- plots
+
+
+def summary_columns(result: SweepResult) -> list[str]:
+    """The columns :func:`plot_sweep` shows: errors, solves per step,
+    penetration and the final values of the first observables."""
+    cols = list(result.rows[0])
+    errors = [c for c in cols if c.startswith("error_")]
+    finals = [c for c in cols if c.endswith("_final")][:4]
+    return errors + ["solves_per_step_mean", "max_penetration"] + finals
+
+
+def plot_sweep(result: SweepResult, path: Path) -> Path:
+    """Main columns against the swept values: curves over the first swept value
+    (one per value of the second, when there is one and it has at most 8)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    varying = [k for k in result.swept if len(set(result.column(k))) > 1] or result.swept[:1]
+    x_name = varying[0]
+    group = varying[1] if len(varying) > 1 and len(set(result.column(varying[1]))) <= 8 else None
+    cols = summary_columns(result)
+    ncol = min(3, len(cols))
+    nrow = -(-len(cols) // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
+    x = result.column(x_name).astype(float)
+    groups = sorted(set(result.column(group))) if group else [None]
+    for ax, col in zip(axes.flat, cols):
+        y = result.column(col).astype(float)
+        for g in groups:
+            sel = np.ones(len(x), bool) if g is None else result.column(group) == g
+            order = np.argsort(x[sel], kind="stable")
+            ax.plot(x[sel][order], y[sel][order], "o-", ms=3, label=None if g is None else f"{group} = {g:g}")
+        if col.startswith("error_") and np.all(y > 0):
+            ax.set_yscale("log")
+        if x_name == "h":
+            ax.set_xscale("log")
+        ax.set_xlabel(x_name)
+        ax.set_title(col, fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(cols):]:
+        ax.axis("off")
+    if group:
+        axes.flat[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

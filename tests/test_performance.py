@@ -1,0 +1,94 @@
+"""Fast paths agree with the generic path; another h or parameter value reuses
+the compilation; the benchmark writes its table. (Speed itself is measured by
+``nsga-jax bench``, not asserted here.)"""
+
+import csv
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+from nsga_jax import simulate
+from nsga_jax.bench import COLUMNS, bench
+from nsga_jax.scenes import load_scene
+
+WINDOWS = {
+    "bouncing_ball": {"t_end": 1.0},
+    "rigid_pendulum": {"t_end": 1.0},
+    "impacting_bar": {"t_end": 0.7},
+    "rigid_box": {"t_end": 0.3},
+    "flexible_pendulum": {"t_end": 0.03},
+}
+CUBE = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43}
+
+
+def fast_against_generic(name, overrides, scheme="ds"):
+    scene = load_scene(name, {**overrides, "scheme": scheme})
+    fast = scene.scheme()
+    generic = dataclasses.replace(fast, fast_paths=False)
+    args = (0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0)
+    a = simulate(scene.model, fast, *args)
+    b = simulate(scene.model, generic, *args)
+    assert a.n_steps == b.n_steps
+    for x, y in ((a.q, b.q), (a.v, b.v)):
+        np.testing.assert_allclose(x, y, rtol=0, atol=1e-9 * (np.abs(y).max() + 1e-12))
+    np.testing.assert_array_equal(a.records.active_velocity, b.records.active_velocity)
+
+
+@pytest.mark.parametrize("name", sorted(WINDOWS))
+def test_fast_paths_agree_with_generic_path(name):
+    fast_against_generic(name, WINDOWS[name])
+
+
+@pytest.mark.parametrize("scheme", ["cs", "mj"])
+def test_fast_paths_agree_for_other_schemes(scheme):
+    fast_against_generic("impacting_bar", WINDOWS["impacting_bar"], scheme)
+
+
+@pytest.mark.slow
+def test_fast_paths_agree_on_the_cube():
+    fast_against_generic("flexible_cube", CUBE)
+
+
+def test_generic_path_keeps_nothing_constant():
+    scene = load_scene("impacting_bar")
+    generic = dataclasses.replace(scene.scheme(), fast_paths=False)
+    ops = generic.prepare(scene.model, 1e-3, 0.0)
+    assert all(getattr(ops, f.name) is None for f in dataclasses.fields(ops))
+    ops = scene.scheme().prepare(scene.model, 1e-3, 0.0)
+    assert ops.smooth_inv is not None and ops.position_inv is not None and ops.velocity_inv is not None
+
+
+def test_no_recompilation_when_only_h_or_parameters_change():
+    compiles = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(duration)
+
+    load_scene("impacting_bar", {"t_end": 0.2}).run()
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        for overrides in ({"h": 1.3e-3}, {"E": 700.0, "e": 0.5, "velocity": 8.0}, {"h": 7e-4, "t_end": 0.3}):
+            sol = load_scene("impacting_bar", {"t_end": 0.2, **overrides}).run()
+            assert sol.compile_time < 0.5
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert compiles == []
+
+
+def test_bench_writes_its_table(tmp_path):
+    rows = bench(["bouncing_ball"], [1, 8], ["float64", "float32"], repeats=1, max_steps=200, out=tmp_path,
+                 progress=False)
+    with open(tmp_path / "bench.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    assert len(rows) == len(table) == 4
+    assert set(COLUMNS) <= set(table[0])
+    for r in rows:
+        assert r["us_per_step"] > 0 and r["compile_s"] > 0 and r["steps"] == 200
+        assert r["member_steps_per_s"] == pytest.approx(r["batch"] * 1e6 / r["us_per_step"])
+    f32 = [r for r in rows if r["dtype"] == "float32"]
+    assert all(0 < r["float32_error"] < 1e-4 for r in f32)
+    assert {(r["dtype"], r["batch"]) for r in rows} == {("float64", 1), ("float64", 8), ("float32", 1),
+                                                       ("float32", 8)}

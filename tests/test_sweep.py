@@ -1,0 +1,141 @@
+"""Sweeps: the grid, agreement with single runs, resuming after a kill, and
+sharding over two (forced) CPU devices giving the same table."""
+
+import csv
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nsga_jax.cli import main
+from nsga_jax.metrics import relative_l1_error
+from nsga_jax.results import ConfigError
+from nsga_jax.scenes import load_scene
+from nsga_jax.sweep import parse_grid, sweep
+
+ROOT = Path(__file__).resolve().parents[1]
+TIMING = {"batch_wall_s"}
+
+
+def table(path: Path) -> list[dict]:
+    with open(path, newline="") as f:
+        return [{k: v for k, v in r.items() if k not in TIMING} for r in csv.DictReader(f)]
+
+
+def run_python(code: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, **(env_extra or {})}
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_parse_grid():
+    grid = parse_grid("e=0:1:11, E=800:1000:5")
+    assert list(grid) == ["e", "E"]
+    np.testing.assert_allclose(grid["e"], np.linspace(0, 1, 11))
+    np.testing.assert_allclose(grid["E"], [800, 850, 900, 950, 1000])
+    np.testing.assert_allclose(parse_grid("e=0.2;0.5")["e"], [0.2, 0.5])
+    for bad in ("e", "e=0:1", "e=a:b:3", "e=0:1:0", "", "e=1,e=2"):
+        with pytest.raises(ConfigError):
+            parse_grid(bad)
+
+
+@pytest.mark.parametrize("grid, message", [
+    ({"n_elements": [10, 20]}, "structural parameter"),
+    ({"nope": [1.0]}, "not a parameter"),
+    ({"e": [0.5, 1.5]}, r"e must be in \[0, 1\]"),
+])
+def test_bad_sweeps_refused_before_running(grid, message):
+    with pytest.raises(ConfigError, match=message):
+        sweep("impacting_bar", grid)
+
+
+def test_rows_equal_single_runs(tmp_path):
+    res = sweep("bouncing_ball", {"e": [0.6, 0.9]}, hs=[1e-3, 2.5e-3], overrides={"t_end": 1.5},
+                out=tmp_path, batch_size=3)
+    assert [(r["e"], r["h"]) for r in res.rows] == [(0.6, 1e-3), (0.6, 2.5e-3), (0.9, 1e-3), (0.9, 2.5e-3)]
+    for row in res.rows:
+        scene = load_scene("bouncing_ball", {"e": row["e"], "h": row["h"], "t_end": 1.5})
+        sol = scene.run()
+        exact = scene.exact(sol.ts)
+        assert row["n_steps"] == sol.n_steps and row["result"] == "successful"
+        assert row["error_z"] == pytest.approx(relative_l1_error(sol.observables["z"], exact["z"]), rel=1e-10)
+        assert row["z_final"] == pytest.approx(sol.observables["z"][-1], rel=1e-10, abs=1e-12)
+        assert row["solves_per_step_mean"] == pytest.approx(sol.stats["iterations"]["linear_solves"]["mean"])
+    assert (tmp_path / "sweep.png").stat().st_size > 0
+    assert len(table(tmp_path / "sweep.csv")) == 4
+
+
+KILLED_SWEEP = """
+import os, signal
+from nsga_jax.sweep import sweep
+
+def kill_after_first(k, rows):
+    if k == 0:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+sweep("bouncing_ball", {{"e": [0.3, 0.6, 0.9]}}, hs=[2e-3], overrides={{"t_end": 1.0}}, out={out!r},
+      batch_size=2, on_batch=kill_after_first)
+"""
+
+
+def test_killed_sweep_resumes_to_the_same_table(tmp_path):
+    killed = tmp_path / "killed"
+    proc = run_python(KILLED_SWEEP.format(out=str(killed)))
+    assert proc.returncode == -9, proc.stderr[-2000:]
+    assert (killed / "batches" / "batch_00000.csv").exists()
+    assert not (killed / "sweep.csv").exists()
+
+    resumed_batches = []
+    sweep("bouncing_ball", {"e": [0.3, 0.6, 0.9]}, hs=[2e-3], overrides={"t_end": 1.0}, out=killed,
+          batch_size=2, on_batch=lambda k, rows: resumed_batches.append(k))
+    assert resumed_batches == [1]  # batch 0 was not run again
+    whole = tmp_path / "whole"
+    sweep("bouncing_ball", {"e": [0.3, 0.6, 0.9]}, hs=[2e-3], overrides={"t_end": 1.0}, out=whole, batch_size=2)
+    assert table(killed / "sweep.csv") == table(whole / "sweep.csv")
+
+    with pytest.raises(ConfigError, match="holds another sweep"):
+        sweep("bouncing_ball", {"e": [0.3]}, out=killed)
+
+
+SHARDED_SWEEP = """
+import jax
+from nsga_jax.sweep import sweep
+assert len(jax.devices()) == 2, jax.devices()
+sweep("impacting_bar", {{"e": [0.0, 0.5, 1.0]}}, hs=[1e-3, 2e-3], overrides={{"t_end": 0.4}}, out={out!r},
+      batch_size=4)
+"""
+
+
+def test_sharded_sweep_equals_unsharded(tmp_path):
+    sharded = tmp_path / "sharded"
+    proc = run_python(SHARDED_SWEEP.format(out=str(sharded)),
+                      {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    single = tmp_path / "single"
+    sweep("impacting_bar", {"e": [0.0, 0.5, 1.0]}, hs=[1e-3, 2e-3], overrides={"t_end": 0.4}, out=single,
+          batch_size=4)
+    a, b = table(sharded / "sweep.csv"), table(single / "sweep.csv")
+    assert len(a) == 6
+    for ra, rb in zip(a, b):
+        assert ra.keys() == rb.keys()
+        for k in ra:
+            try:
+                assert float(ra[k]) == pytest.approx(float(rb[k]), rel=1e-12, abs=1e-15), k
+            except ValueError:
+                assert ra[k] == rb[k], k
+
+
+def test_cli_sweep(tmp_path, capsys):
+    out = tmp_path / "s"
+    rc = main(["sweep", "bouncing_ball", "--grid", "e=0.5;0.9", "--h", "2e-3", "--set", "t_end=0.5",
+               "--out", str(out), "--quiet"])
+    assert rc == 0
+    rows = table(out / "sweep.csv")
+    assert [float(r["e"]) for r in rows] == [0.5, 0.9]
+    assert (out / "sweep.png").exists() and (out / "sweep.json").exists()
+    assert main(["sweep", "bouncing_ball", "--grid", "mass=-1;1", "--out", str(tmp_path / "bad")]) == 2
+    assert "mass" in capsys.readouterr().err
