@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .integrators.base import AbstractScheme, StepOutput
+from .integrators.base import AbstractScheme, StepOutput, output_template
 from .models.base import Model
 from .results import SUBPROBLEMS, ConfigError, ConvergenceError, Result
 
@@ -263,7 +263,7 @@ def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
     a traced value, so runs with another h (another number of steps) reuse the
     compilation; under ``vmap`` a member that has finished keeps its state."""
     state, k, stopped = carry
-    template = jax.eval_shape(lambda s: scheme.step(model, ops, s, h)[1], state)
+    template = output_template(model, state.q.dtype)
     buffer = jax.tree_util.tree_map(lambda s: jnp.zeros((length, *s.shape), s.dtype), template)
 
     def going(c):

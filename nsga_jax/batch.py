@@ -45,7 +45,7 @@ from ._simulate import (
     validate_model,
     validate_scheme,
 )
-from .integrators.base import AbstractScheme, StepOutput
+from .integrators.base import AbstractScheme, StepOutput, output_template
 from .models.base import Model
 from .results import ConfigError, Result
 
@@ -112,8 +112,8 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
     """
     state, k, stopped = carry
     step = jax.vmap(lambda m, s, o, st, hh: s.step(m, o, st, hh))
-    template = jax.eval_shape(lambda st: step(model, scheme, ops, st, h)[1], state)
-    buffer = jax.tree_util.tree_map(lambda s: jnp.zeros((length, *s.shape), s.dtype), template)
+    template = output_template(model, state.q.dtype)
+    buffer = jax.tree_util.tree_map(lambda s: jnp.zeros((length, len(h), *s.shape), s.dtype), template)
     mask = jnp.zeros((length, len(h)), bool)
 
     def going(c):
@@ -200,8 +200,8 @@ class BatchRun:
         self.longest = int(np.max(n_steps))
         self.length = length or batch_chunk_length(model, B)
         prepare, self._run = _compiled_steps(self.length, mesh)
-        every = broadcast_members(scheme, B)
-        args = _place((model, every, np.full(B, t0), np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
+        schemes = broadcast_members(scheme, B)
+        args = _place((model, schemes, np.full(B, t0), np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
         tc = time.perf_counter()
         prepare = prepare.lower(*args).compile()
         self.compile_time = time.perf_counter() - tc

@@ -11,6 +11,7 @@ import pytest
 
 from nsga_jax import simulate
 from nsga_jax.bench import COLUMNS, bench
+from nsga_jax.integrators.base import output_template
 from nsga_jax.scenes import load_scene
 
 WINDOWS = {
@@ -94,3 +95,16 @@ def test_bench_writes_its_table(tmp_path):
     assert all(0 < r["float32_error"] < 1e-4 for r in f32)
     assert {(r["dtype"], r["batch"]) for r in rows} == {("float64", 1), ("float64", 8), ("float32", 1),
                                                        ("float32", 8)}
+
+
+@pytest.mark.parametrize("scheme", ["ds", "dsn", "cs", "mj"])
+@pytest.mark.parametrize("name", ["bouncing_ball", "rigid_pendulum", "rigid_box"])
+def test_record_template_matches_the_step(name, scheme):
+    """The time loops size their record buffers from the model's sizes; the
+    step must return exactly those shapes and dtypes."""
+    scene = load_scene(name, {"scheme": scheme})
+    model, sch = scene.model, scene.scheme()
+    ops = sch.prepare(model, 1e-3, 0.0)
+    state = sch.init(model, 0.0, scene.q0, scene.v0)
+    traced = jax.eval_shape(lambda s: sch.step(model, ops, s, 1e-3)[1], state)
+    assert traced == output_template(model, state.q.dtype)

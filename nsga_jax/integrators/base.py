@@ -319,6 +319,22 @@ def make_output(model: Model, t, q, v, lam, iterations, residual, tolerance, res
     )
 
 
+def output_template(model: Model, dtype) -> StepOutput:
+    """Shapes and dtypes of one step's :class:`StepOutput` (what
+    :func:`make_output` returns), from the model's sizes alone: the time loops
+    size their record buffers with it instead of tracing the step once more."""
+    n, nb, nc, nu = model.n_dof, model.n_bilateral, model.n_constraints, model.n_unilateral
+
+    def f(*shape):
+        return jax.ShapeDtypeStruct(shape, dtype)
+
+    flags = jax.ShapeDtypeStruct((nc,), jnp.bool_)
+    return StepOutput(t=f(), q=f(n), v=f(n), lam=f(nb), nu=f(nc), impulse=f(nc), gap=f(nu), bilateral=f(nb),
+                      bilateral_rate=f(nb), active_position=flags, active_velocity=flags,
+                      iterations=jax.ShapeDtypeStruct((3,), jnp.int32), residual=f(3), tolerance=f(3),
+                      result=jax.ShapeDtypeStruct((), jnp.int8))
+
+
 def constraint_jacobian_or_empty(model: Model, q: Vector) -> jax.Array:
     if model.n_constraints == 0:
         return jnp.zeros((0, model.n_dof), q.dtype)
