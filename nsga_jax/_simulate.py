@@ -30,7 +30,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .integrators.base import AbstractScheme, StepOutput, output_template
+from .integrators.base import (
+    AbstractScheme,
+    StepOutput,
+    output_template,
+    pack_output,
+    packed_sizes,
+    unpack_outputs,
+)
 from .models.base import Model
 from .results import SUBPROBLEMS, ConfigError, ConvergenceError, Result
 
@@ -257,14 +264,16 @@ def _n_steps(t0: float, t1: float, h: float) -> int:
 
 def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
     """Up to ``length`` steps of ``scheme`` in one ``while_loop``, writing each
-    step's record into a buffer of ``length`` records. The loop stops after step
+    step's record (packed in two vectors, :func:`pack_output`) into buffers of
+    ``length`` records. The loop stops after step
     ``n_steps`` (or after a failure when ``stop_on_failure``); the buffer's
     unused tail is marked not done and dropped by the caller. The step count is
     a traced value, so runs with another h (another number of steps) reuse the
     compilation; under ``vmap`` a member that has finished keeps its state."""
     state, k, stopped = carry
     template = output_template(model, state.q.dtype)
-    buffer = jax.tree_util.tree_map(lambda s: jnp.zeros((length, *s.shape), s.dtype), template)
+    n_float, n_int = packed_sizes(template)
+    buffer = (jnp.zeros((length, n_float), state.q.dtype), jnp.zeros((length, n_int), jnp.int32))
 
     def going(c):
         i, _, k, stopped, _ = c
@@ -273,12 +282,12 @@ def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
     def body(c):
         i, state, k, stopped, buffer = c
         state, out = scheme.step(model, ops, state, h)
-        buffer = jax.tree_util.tree_map(lambda b, o: lax.dynamic_update_index_in_dim(b, o, i, 0), buffer, out)
+        buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 0) for b, x in zip(buffer, pack_output(out)))
         failed = out.result != Result.successful
         return i + 1, state, k + 1, stopped | (failed & stop_on_failure), buffer
 
     i, state, k, stopped, buffer = lax.while_loop(going, body, (jnp.zeros((), k.dtype), state, k, stopped, buffer))
-    return (state, k, stopped), (buffer, jnp.arange(length) < i)
+    return (state, k, stopped), (unpack_outputs(*buffer, template), jnp.arange(length) < i)
 
 
 def chunk_length(model: Model) -> int:

@@ -45,7 +45,7 @@ from ._simulate import (
     validate_model,
     validate_scheme,
 )
-from .integrators.base import AbstractScheme, StepOutput, output_template
+from .integrators.base import AbstractScheme, StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .results import ConfigError, Result
 
@@ -113,7 +113,9 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
     state, k, stopped = carry
     step = jax.vmap(lambda m, s, o, st, hh: s.step(m, o, st, hh))
     template = output_template(model, state.q.dtype)
-    buffer = jax.tree_util.tree_map(lambda s: jnp.zeros((length, len(h), *s.shape), s.dtype), template)
+    n_float, n_int = packed_sizes(template)
+    B = len(h)
+    buffer = (jnp.zeros((length, B, n_float), state.q.dtype), jnp.zeros((length, B, n_int), jnp.int32))
     mask = jnp.zeros((length, len(h)), bool)
 
     def going(c):
@@ -126,13 +128,14 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
         new_state, out = step(model, scheme, ops, state, h)
         state = jax.tree_util.tree_map(
             lambda a, b: jnp.where(do.reshape(-1, *([1] * (a.ndim - 1))), a, b), new_state, state)
-        buffer = jax.tree_util.tree_map(lambda b, o: lax.dynamic_update_index_in_dim(b, o, i, 0), buffer, out)
+        packed = jax.vmap(pack_output)(out)
+        buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 0) for b, x in zip(buffer, packed))
         mask = lax.dynamic_update_index_in_dim(mask, do, i, 0)
         return i + 1, state, k + do.astype(k.dtype), stopped, buffer, mask
 
     init = (jnp.zeros((), jnp.int32), state, k, stopped, buffer, mask)
     _, state, k, stopped, buffer, mask = lax.while_loop(going, body, init)
-    records = jax.tree_util.tree_map(lambda b: jnp.swapaxes(b, 0, 1), buffer)
+    records = unpack_outputs(*(jnp.swapaxes(b, 0, 1) for b in buffer), template)
     return (state, k, stopped), (records, mask.T)
 
 

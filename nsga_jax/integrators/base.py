@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -333,6 +334,44 @@ def output_template(model: Model, dtype) -> StepOutput:
                       bilateral_rate=f(nb), active_position=flags, active_velocity=flags,
                       iterations=jax.ShapeDtypeStruct((3,), jnp.int32), residual=f(3), tolerance=f(3),
                       result=jax.ShapeDtypeStruct((), jnp.int8))
+
+
+def _is_float(spec) -> bool:
+    return jnp.issubdtype(spec.dtype, jnp.floating)
+
+
+def pack_output(out: StepOutput) -> tuple[jax.Array, jax.Array]:
+    """One step's record as two flat vectors: its floating-point fields and
+    its integer and boolean fields (as int32). Writing two vectors per step
+    into a time loop's buffers costs less than writing fifteen small arrays
+    (each write is a separate operation on the CPU)."""
+    leaves = jax.tree_util.tree_leaves(out)
+    floats = [jnp.ravel(x) for x in leaves if _is_float(x)]
+    ints = [jnp.ravel(x).astype(jnp.int32) for x in leaves if not _is_float(x)]
+    return jnp.concatenate(floats), jnp.concatenate(ints)
+
+
+def packed_sizes(template: StepOutput) -> tuple[int, int]:
+    """Lengths of the two vectors :func:`pack_output` makes."""
+    leaves = jax.tree_util.tree_leaves(template)
+    return (sum(math.prod(x.shape) for x in leaves if _is_float(x)),
+            sum(math.prod(x.shape) for x in leaves if not _is_float(x)))
+
+
+def unpack_outputs(floats: jax.Array, ints: jax.Array, template: StepOutput) -> StepOutput:
+    """Records (..., fields) packed by :func:`pack_output` back into a
+    :class:`StepOutput` with the leading axes of ``floats``, typed as ``template``."""
+    lead = floats.shape[:-1]
+    offsets = {True: 0, False: 0}
+    leaves = []
+    for spec in jax.tree_util.tree_leaves(template):
+        kind = _is_float(spec)
+        size = math.prod(spec.shape)
+        source = floats if kind else ints
+        part = source[..., offsets[kind]:offsets[kind] + size]
+        offsets[kind] += size
+        leaves.append(part.reshape(*lead, *spec.shape).astype(spec.dtype))
+    return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(template), leaves)
 
 
 def constraint_jacobian_or_empty(model: Model, q: Vector) -> jax.Array:
