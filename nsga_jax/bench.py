@@ -41,8 +41,8 @@ CASES: dict[str, dict] = {
 """Each scene's benchmark configuration (overrides of its defaults)."""
 
 COLUMNS = ("scene", "scheme", "h", "batch", "dtype", "device", "n_dof", "steps", "us_per_step",
-           "member_steps_per_s", "speedup_vs_single", "compile_s", "solves_per_step", "factor_solve_us",
-           "float32_error")
+           "member_steps_per_s", "speedup_vs_single", "compile_s", "solves_per_step", "failed_steps",
+           "factor_solve_us", "float32_error")
 
 
 def device_name() -> str:
@@ -150,6 +150,9 @@ def bench(
         for dtype in dtypes:
             single, wall = _single(scene, dtype, repeats)
             steps = single.n_steps
+            if single.stats["failed_steps"] and progress:
+                print(f"{name} {dtype}: warning: {single.stats['failed_steps']} failed step(s) "
+                      f"({single.result.name}); its timings are those of a failing run", flush=True)
             single_us = 1e6 * wall / steps
             error = ""
             observable = (scene.spec.error_observables or scene.spec.observables)[0]
@@ -161,6 +164,7 @@ def bench(
             common = {"scene": name, "scheme": scheme, "h": h, "dtype": dtype, "device": device,
                       "n_dof": scene.model.n_dof, "steps": steps,
                       "solves_per_step": single.stats["iterations"]["linear_solves"]["mean"],
+                      "failed_steps": single.stats["failed_steps"],
                       "factor_solve_us": fs, "float32_error": error}
             for batch in batches:
                 if batch == 1:

@@ -265,6 +265,10 @@ def _sweep(args) -> int:
                    progress=not args.quiet)
     print(f"{len(result.rows)} runs on {len(devices)} device(s); compile {result.compile_time:.1f} s, "
           f"runs {result.wall_time:.2f} s (this session's batches)")
+    for row in result.failed:
+        swept = ", ".join(f"{k}={row[k]:g}" for k in result.swept)
+        print(f"warning: run {row['member']} ({swept}) failed at {row['failed_steps']} step(s): {row['result']}",
+              file=sys.stderr)
     print(f"wrote {result.path} and {result.plot}")
     return 0
 

@@ -146,6 +146,12 @@ class SweepResult:
     def column(self, name: str) -> np.ndarray:
         return np.asarray([r[name] for r in self.rows])
 
+    @property
+    def failed(self) -> list[dict[str, Any]]:
+        """The rows of runs with failed steps (Newton cap or non-finite
+        residual; ``result`` names the first failure)."""
+        return [r for r in self.rows if r["failed_steps"]]
+
 
 # -------------------------------------------------------------------- runs
 
@@ -299,9 +305,13 @@ def sweep(
         progress: a progress bar over batches on stderr.
         on_batch: called as ``on_batch(k, rows)`` after batch k is written.
     """
+    if isinstance(max_records, bool) or not isinstance(max_records, (int, np.integer)) or max_records < 1:
+        raise ConfigError(f"max_records must be an integer >= 1, got {max_records!r}")
+    devices = jax.devices() if devices is None else list(devices)
+    if not devices:
+        raise ConfigError("devices must name at least one device")
     mems = members(scene, grid, hs, overrides)
     swept = [k for k in mems[0].values]
-    devices = jax.devices() if devices is None else list(devices)
     mesh = member_mesh(devices) if len(devices) > 1 else None
     n_dev = len(devices)
     if batch_size is None:
@@ -354,9 +364,9 @@ def _claim(out_dir: Path, scene, grid, hs, overrides, batch_size: int, n: int) -
         if old != json.loads(json.dumps(spec)):
             raise ConfigError(f"{out_dir} holds another sweep ({manifest}); use another directory or remove it")
         return
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "batches").mkdir(exist_ok=True)
-    manifest.write_text(json.dumps(spec, indent=2) + "\n")
+    if jax.process_index() == 0:  # one writer when several hosts share the directory
+        (out_dir / "batches").mkdir(parents=True, exist_ok=True)
+        manifest.write_text(json.dumps(spec, indent=2) + "\n")
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:

@@ -139,3 +139,22 @@ def test_cli_sweep(tmp_path, capsys):
     assert (out / "sweep.png").exists() and (out / "sweep.json").exists()
     assert main(["sweep", "bouncing_ball", "--grid", "mass=-1;1", "--out", str(tmp_path / "bad")]) == 2
     assert "mass" in capsys.readouterr().err
+
+
+def test_failed_runs_are_reported(tmp_path, capsys):
+    res = sweep("rigid_pendulum", {"e": [0.5, 0.9]}, hs=[0.05], overrides={"t_end": 1.0, "max_iter": 1})
+    assert len(res.failed) == 2
+    assert all(r["result"] != "successful" and r["failed_steps"] > 0 for r in res.failed)
+    rc = main(["sweep", "rigid_pendulum", "--grid", "e=0.5", "--h", "0.05", "--set", "t_end=1.0", "--set", "max_iter=1",
+               "--out", str(tmp_path / "f"), "--quiet"])
+    assert rc == 0
+    assert "warning: run 0 (e=0.5, h=0.05) failed at 20 step(s): smooth_max_iter" in capsys.readouterr().err
+
+
+def test_bad_sweep_settings():
+    with pytest.raises(ConfigError, match="max_records"):
+        sweep("bouncing_ball", {"e": [0.5]}, max_records=0)
+    with pytest.raises(ConfigError, match="at least one device"):
+        sweep("bouncing_ball", {"e": [0.5]}, devices=[])
+    with pytest.raises(ConfigError, match="batch_size"):
+        sweep("bouncing_ball", {"e": [0.5]}, batch_size=0)
