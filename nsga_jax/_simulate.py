@@ -136,7 +136,7 @@ class RunTotals:
     """Statistics over every step of a run, added chunk by chunk, so that they
     cover the steps a strided record leaves out: Newton iterations (sum and max
     per sub-problem, and of their total, the linear solves per step), failed
-    step numbers, the smallest gap [m] and the largest bilateral violations
+    step numbers and the first one's result code, the smallest gap [m] and the largest bilateral violations
     (position [m], velocity [m/s])."""
 
     n_steps: int = 0
@@ -145,6 +145,7 @@ class RunTotals:
     solves_sum: float = 0.0
     solves_max: int = 0
     failed: list[int] = field(default_factory=list)
+    first_result: int = 0
     min_gap: float = math.inf
     max_bilateral: float = 0.0
     max_bilateral_rate: float = 0.0
@@ -161,6 +162,8 @@ class RunTotals:
         self.solves_sum += float(solves.sum())
         self.solves_max = max(self.solves_max, int(solves.max()))
         bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
+        if bad.size and not self.failed:
+            self.first_result = int(np.asarray(records.result)[bad[0]])
         self.failed.extend((first_step + bad).tolist())
         gap = np.asarray(records.gap)
         if gap.size:

@@ -32,6 +32,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ._simulate import (
     DTYPES,
     Observe,
+    RunTotals,
     Solution,
     _cast,
     _check_finite_positive,
@@ -231,6 +232,24 @@ class BatchRun:
             yield _to_host((out, done))
 
 
+def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float, n_steps_requested: int,
+                    run: BatchRun, totals: RunTotals | None = None) -> Solution:
+    """One member's :class:`Solution` from its (NumPy) records. Without
+    ``totals`` the records hold every step and give the statistics and the
+    first failure; with them (records strided) those come from ``totals``."""
+    records = _prepend_initial(model, chunks, t0, q0, v0)
+    if totals is None:
+        bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
+        result = Result(int(records.result[bad[0]])) if bad.size else Result.successful
+        n_steps = len(records.t) - 1
+    else:
+        result = Result(int(totals.first_result)) if totals.failed else Result.successful
+        n_steps = totals.n_steps
+    return Solution(ts=np.asarray(records.t), q=np.asarray(records.q), v=np.asarray(records.v), records=records,
+                    h=h, n_steps=n_steps, n_steps_requested=n_steps_requested, result=result,
+                    wall_time=run.wall_time, compile_time=run.compile_time, totals=totals)
+
+
 def simulate_batch(
     model: Model,
     scheme: AbstractScheme,
@@ -277,17 +296,8 @@ def simulate_batch(
             for b in range(B):
                 if done[b].any():
                     chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
-    solutions = []
-    for b in range(B):
-        records = _prepend_initial(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype))
-        codes = np.asarray(records.result)
-        bad = np.nonzero(codes != Result.successful)[0]
-        solutions.append(Solution(
-            ts=np.asarray(records.t), q=np.asarray(records.q), v=np.asarray(records.v), records=records,
-            h=float(hs[b]), n_steps=len(records.t) - 1, n_steps_requested=int(n_steps[b]),
-            result=Result(int(codes[bad[0]])) if bad.size else Result.successful,
-            wall_time=run.wall_time, compile_time=run.compile_time,
-        ))
+    solutions = [member_solution(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype), float(hs[b]),
+                                 int(n_steps[b]), run) for b in range(B)]
     if observe is not None:
         for sol in solutions:
             sol.observables = {k: np.asarray(v) for k, v in observe(_float64_view(sol)).items()}

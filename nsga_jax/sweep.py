@@ -34,8 +34,8 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._simulate import RunTotals, Solution, _cast, _float64_view, _n_steps, _prepend_initial, precision
-from .batch import BatchRun, member_mesh, stack_models
+from ._simulate import RunTotals, Solution, _cast, _float64_view, _n_steps, precision
+from .batch import BatchRun, member_mesh, member_solution, stack_models
 from .metrics import relative_l1_error
 from .results import ConfigError, Result
 from .scenes.base import Scene, load_scene
@@ -189,11 +189,8 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
     for b, member in enumerate(batch):
         scene = member.scene
         mine = jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)
-        recs = _prepend_initial(scene.model, [mine], 0.0, scene.q0.astype(dtype), scene.v0.astype(dtype))
-        sol = Solution(ts=np.asarray(recs.t), q=np.asarray(recs.q), v=np.asarray(recs.v), records=recs,
-                       h=float(hs[b]), n_steps=int(totals.steps[b]), n_steps_requested=int(n_steps[b]),
-                       result=Result(int(totals.first_failure[b])), wall_time=run.wall_time,
-                       compile_time=run.compile_time, totals=totals.member(b))
+        sol = member_solution(scene.model, [mine], 0.0, scene.q0.astype(dtype), scene.v0.astype(dtype),
+                              float(hs[b]), int(n_steps[b]), run, totals=totals.member(b))
         rows.append(_row(member, sol))
     return rows, run.compile_time, run.wall_time
 
@@ -241,7 +238,8 @@ class _BatchTotals:
     def member(self, b: int) -> RunTotals:
         return RunTotals(n_steps=int(self.steps[b]), iterations_sum=self.it_sum[b], iterations_max=self.it_max[b],
                          solves_sum=float(self.solves_sum[b]), solves_max=int(self.solves_max[b]),
-                         failed=self.failed[b], min_gap=float(self.min_gap[b]),
+                         failed=self.failed[b], first_result=int(self.first_failure[b]),
+                         min_gap=float(self.min_gap[b]),
                          max_bilateral=float(self.max_bilateral[b]),
                          max_bilateral_rate=float(self.max_bilateral_rate[b]))
 
