@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from nsga_jax.integrators.linalg import dense_solve, inverse_solve, solve_bordered
+from nsga_jax.integrators.linalg import Factorisation, dense_solve, inverse_solve, solve_bordered
 
 
 def full_matrix(A, Gu, Gl, a, k, p):
@@ -28,7 +28,8 @@ def test_schur_solve_equals_full_bordered_solve(mask, symmetric):
     k, p = 2.5, 1.7
     r1, r2 = rng.normal(size=n), rng.normal(size=m)
     expected = np.linalg.solve(full_matrix(A, Gu, Gl, a, k, p), -np.concatenate([r1, r2]))
-    for solve, pre in ((dense_solve(jnp.asarray(A)), None),
+    lu = Factorisation.of(jnp.asarray(A), jnp.zeros(()), jnp.zeros(()))
+    for solve, pre in ((dense_solve(jnp.asarray(A)), None), (lu.solve, None),
                        (inverse_solve(jnp.asarray(np.linalg.inv(A))), jnp.asarray(np.linalg.solve(A, Gu.T)))):
         dx, dmu = solve_bordered(solve, jnp.asarray(r1), jnp.asarray(r2), jnp.asarray(Gu), jnp.asarray(Gl),
                                  jnp.asarray(a), k, p, pre)

@@ -24,16 +24,16 @@ WINDOWS = {
 CUBE = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43}
 
 
-def fast_against_generic(name, overrides, scheme="ds"):
+def fast_against_generic(name, overrides, scheme="ds", atol=1e-9, **settings):
     scene = load_scene(name, {**overrides, "scheme": scheme})
-    fast = scene.scheme()
+    fast = dataclasses.replace(scene.scheme(), **settings)
     generic = dataclasses.replace(fast, fast_paths=False)
     args = (0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0)
     a = simulate(scene.model, fast, *args)
     b = simulate(scene.model, generic, *args)
     assert a.n_steps == b.n_steps
     for x, y in ((a.q, b.q), (a.v, b.v)):
-        np.testing.assert_allclose(x, y, rtol=0, atol=1e-9 * (np.abs(y).max() + 1e-12))
+        np.testing.assert_allclose(x, y, rtol=0, atol=atol * (np.abs(y).max() + 1e-12))
     np.testing.assert_array_equal(a.records.active_velocity, b.records.active_velocity)
 
 
@@ -49,7 +49,10 @@ def test_fast_paths_agree_for_other_schemes(scheme):
 
 @pytest.mark.slow
 def test_fast_paths_agree_on_the_cube():
-    fast_against_generic("flexible_cube", CUBE)
+    """The cube's fast path keeps its factorisations between iterations and
+    steps (modified Newton), so its iterates differ from Newton's: compared at
+    a tight tolerance, where both converged solutions are close to exact."""
+    fast_against_generic("flexible_cube", CUBE, atol=1e-8, tol_r=1e-10, tol_f=1e-10)
 
 
 def test_generic_path_keeps_nothing_constant():

@@ -36,10 +36,13 @@ DIVERGENCE_FACTOR = 1e10
 
 
 class StepState(eqx.Module):
-    """What a scheme carries from step to step (all float arrays).
+    """What a scheme carries from step to step.
 
     t [s]; q, v (n,): coordinates and velocities; vd (n,): smooth acceleration
-    v̇̃; a (n,): generalized-α pseudo-acceleration (both zero for Moreau–Jean).
+    v̇̃; a (n,): generalized-α pseudo-acceleration (both zero for Moreau–Jean);
+    factorisations: the iteration-matrix factorisations a scheme keeps for its
+    next step (one per sub-problem, ``None`` where it keeps none; see
+    :attr:`~nsga_jax.integrators.ds.DS.reuse_min_dof`), or ``None``.
     """
 
     t: Scalar
@@ -47,6 +50,7 @@ class StepState(eqx.Module):
     v: Vector
     vd: Vector
     a: Vector
+    factorisations: tuple | None = None
 
 
 class StepOutput(eqx.Module):

@@ -99,8 +99,8 @@ class CS(AbstractGenAlpha):
                                     with_forces=False)
 
         def residuals(xs, xp, xv):
-            rp = position_res(xs)[0](xp)
-            return smooth_res(xs, xp, xv)[0](xs), rp, velocity_res(xs, xp, rp.aux[0])[0](xv)
+            rp = position_res(xs).residual(xp)
+            return smooth_res(xs, xp, xv).residual(xs), rp, velocity_res(xs, xp, rp.aux[0]).residual(xv)
 
         def norms(rs):
             return jnp.stack([jnp.linalg.norm(r.r) for r in rs])
@@ -116,16 +116,16 @@ class CS(AbstractGenAlpha):
         def sweep(carry):
             """One global iteration: Gauss-Seidel over the block-diagonal Jacobian."""
             (xs, xp, xv), (rs, _, _), _, it = carry
-            dxs, fs = smooth_res(xs, xp, xv)[1](xs, rs)
+            dxs, fs = smooth_res(xs, xp, xv).update(xs, rs)
             xs = _add(xs, dxs)
-            res_p, upd_p = position_res(xs)
-            dxp, fp = upd_p(xp, res_p(xp))
+            position = position_res(xs)
+            dxp, fp = position.update(xp, position.residual(xp))
             xp = _add(xp, dxp)
-            rp = res_p(xp)
-            res_v, upd_v = velocity_res(xs, xp, rp.aux[0])
-            dxv, fv = upd_v(xv, res_v(xv))
+            rp = position.residual(xp)
+            velocity = velocity_res(xs, xp, rp.aux[0])
+            dxv, fv = velocity.update(xv, velocity.residual(xv))
             xv = _add(xv, dxv)
-            rs_new = (smooth_res(xs, xp, xv)[0](xs), rp, res_v(xv))
+            rs_new = (smooth_res(xs, xp, xv).residual(xs), rp, velocity.residual(xv))
             return (xs, xp, xv), rs_new, jnp.stack([fs, fp, fv]), it + 1
 
         def status(rs, floors):

@@ -19,6 +19,8 @@ iteration matrices are inverted once per step size, outside the time loop.
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 
@@ -37,6 +39,7 @@ from .base import (
     result_code,
 )
 from .coefficients import GenAlphaCoefficients
+from .linalg import Factorisation
 from .newton import solve
 from .subproblems import (
     position_problem,
@@ -75,9 +78,10 @@ class AbstractGenAlpha(AbstractScheme):
         q_pred = state.q + h * state.v + h**2 * (0.5 - co.beta) * state.a + h**2 * co.beta * a_pred
         return a_pred, v_pred, q_pred
 
-    def finalise(self, t, q, v, vd, a_pred) -> StepState:
+    def finalise(self, t, q, v, vd, a_pred, factorisations=None) -> StepState:
         """Algorithm 1, line 41: complete the pseudo-acceleration once, (34c) then holds."""
-        return StepState(t=t, q=q, v=v, vd=vd, a=a_pred + self.coefficients.a_per_vd() * vd)
+        return StepState(t=t, q=q, v=v, vd=vd, a=a_pred + self.coefficients.a_per_vd() * vd,
+                         factorisations=factorisations)
 
 
 class DS(AbstractGenAlpha):
@@ -89,11 +93,40 @@ class DS(AbstractGenAlpha):
         max_iter: Newton iteration cap per sub-problem (static).
         nonsmooth_forces: keep the h² f^p and h f* terms of the jump equations
             (eqs. 30); ``False`` is DSn (eqs. 31). Static.
+        reuse_min_dof: with fast paths on, a model with at least this many
+            coordinates keeps the factorisation of each non-constant iteration
+            matrix from iteration to iteration and from step to step, and
+            refactors only when an update made with it converges too slowly
+            (modified Newton, :func:`~nsga_jax.integrators.newton.newton`);
+            smaller models refactor at every iteration, which costs them less
+            than the bookkeeping. Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
+    reuse_min_dof: int = eqx.field(static=True, default=100, kw_only=True)
 
     name = "ds"
+
+    def reused(self, model: Model) -> tuple[bool, bool, bool]:
+        """Which sub-problems (smooth, position, velocity) keep a factorisation
+        between steps: those whose iteration matrix :meth:`prepare` does not
+        invert once, in models of at least ``reuse_min_dof`` coordinates."""
+        if not self.fast_paths or model.n_dof < self.reuse_min_dof:
+            return False, False, False
+        constant_K = model.constant_mass and model.linear_force
+        smooth = constant_K and (model.n_bilateral == 0 or model.linear_constraints)
+        position = constant_K and model.linear_constraints
+        velocity = constant_K
+        has_jumps = model.n_constraints > 0
+        return not smooth, has_jumps and not position, has_jumps and not velocity
+
+    def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
+        state = super().init(model, t0, q0, v0)
+        reused = self.reused(model)
+        if not any(reused):
+            return state
+        empty = Factorisation.empty(model.n_dof, state.q.dtype)
+        return dataclasses.replace(state, factorisations=tuple(empty if r else None for r in reused))
 
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         co = self.coefficients
@@ -116,10 +149,11 @@ class DS(AbstractGenAlpha):
         a_pred, v_pred, q_pred = self.predict(state, h)
 
         diff = self.differentiable
+        held = state.factorisations or (None, None, None)
         # 1. smooth motion
         co = self.coefficients
         sol_s = solve(smooth_problem, (model, ops, co, tol, t, h, q_pred, v_pred),
-                      smooth_start(v_pred, model.n_bilateral), self.max_iter, diff)
+                      smooth_start(v_pred, model.n_bilateral), self.max_iter, diff, held[0])
         smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
         qt, vt, vd = smooth.q, smooth.v, smooth.vd
         if model.n_constraints == 0:  # nothing to project: U = W = 0 exactly
@@ -127,18 +161,19 @@ class DS(AbstractGenAlpha):
             out = make_output(model, t, qt, vt, smooth.lam, [sol_s.iterations, 0, 0],
                               [sol_s.residual_norm, zero, zero], [sol_s.tolerance, zero, zero],
                               result_code([sol_s]))
-            return self.finalise(t, qt, vt, vd, a_pred), out
+            return self.finalise(t, qt, vt, vd, a_pred, kept([sol_s], state)), out
 
         f_smooth = model.force(qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
         sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces),
-                      projection_start(model, qt), self.max_iter, diff)
+                      projection_start(model, qt), self.max_iter, diff, held[1])
         U, _ = sol_p.x
         active_p, xi, g, _ = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
         sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, active_p, f_smooth, G_prev_v_prev,
-                                         self.nonsmooth_forces), projection_start(model, qt), self.max_iter, diff)
+                                         self.nonsmooth_forces), projection_start(model, qt), self.max_iter, diff,
+                      held[2])
         W, _ = sol_v.x
         active_v, sigma, gdot = sol_v.aux
 
@@ -151,7 +186,14 @@ class DS(AbstractGenAlpha):
             nu=jnp.where(active_p, xi, 0.0), impulse=jnp.where(active_v, sigma, 0.0), g=g, gdot=gdot,
             active_position=active_p, active_velocity=active_v,
         )
-        return self.finalise(t, q, v, vd, a_pred), out
+        return self.finalise(t, q, v, vd, a_pred, kept(results, state)), out
+
+
+def kept(results, state: StepState) -> tuple | None:
+    """The factorisations the sub-problems ended with, for the next step."""
+    if state.factorisations is None:
+        return None
+    return tuple(r.factorisation for r in results) + (None,) * (3 - len(results))
 
 
 class DSn(DS):

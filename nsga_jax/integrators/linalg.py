@@ -22,10 +22,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+import jax.scipy.linalg as jsl
 
-from .._custom_types import ActiveSet, Scalar, Vector
+from .._custom_types import ActiveSet, Matrix, Scalar, Vector
 
 Solve = Callable[[jax.Array], jax.Array]
 """``X -> A^{-1} X`` for X of shape (n,) or (n, m)."""
@@ -39,6 +41,38 @@ def inverse_solve(inverse: jax.Array) -> Solve:
 def dense_solve(matrix: jax.Array) -> Solve:
     """Solve with a fresh LU factorisation of ``matrix``."""
     return lambda rhs: jnp.linalg.solve(matrix, rhs)
+
+
+class Factorisation(eqx.Module):
+    """The LU factors of an iteration matrix's top-left block A, kept so that
+    later Newton iterations (and steps) can solve with it again.
+
+    Attributes:
+        lu, pivots: ``jax.scipy.linalg.lu_factor(A)``, shapes (n, n) and (n,).
+        K_norm, C_norm: Frobenius norms of the tangents A was built from (the
+            round-off floor of the residual uses them).
+        valid: False for the placeholder a run starts with (nothing factored yet).
+    """
+
+    lu: Matrix
+    pivots: jax.Array
+    K_norm: Scalar
+    C_norm: Scalar
+    valid: jax.Array
+
+    @classmethod
+    def of(cls, matrix: Matrix, K_norm: Scalar, C_norm: Scalar) -> "Factorisation":
+        lu, pivots = jsl.lu_factor(matrix)
+        return cls(lu, pivots, K_norm, C_norm, jnp.ones((), bool))
+
+    @classmethod
+    def empty(cls, n: int, dtype) -> "Factorisation":
+        zero = jnp.zeros((), dtype)
+        return cls(jnp.zeros((n, n), dtype), jnp.zeros((n,), jnp.int32), zero, zero, jnp.zeros((), bool))
+
+    def solve(self, rhs: jax.Array) -> jax.Array:
+        """``A^{-1} rhs`` for rhs of shape (n,) or (n, m)."""
+        return jsl.lu_solve((self.lu, self.pivots), rhs)
 
 
 REDUNDANCY_SHIFT = 1e-12

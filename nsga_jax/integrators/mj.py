@@ -42,7 +42,7 @@ from .base import (
     tangents,
 )
 from .linalg import dense_solve, inverse_solve, solve_bordered
-from .newton import Residual, convergence_bound, solve
+from .newton import Problem, Residual, convergence_bound, solve
 
 
 class MJ(AbstractScheme):
@@ -150,4 +150,4 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
                                   ops.velocity_inv_Gt)
         return (dv, dLam), floor
 
-    return residual, update
+    return Problem.from_update(residual, update)

@@ -1,14 +1,17 @@
 """Semi-smooth Newton loop and the convergence test of eq. 51.
 
-Each sub-problem of a step supplies two pure functions:
+Each sub-problem of a step is a :class:`Problem` of three pure functions:
 
 ``residual(x) -> Residual``
     the residual vector r at the iterate x, the right-hand side of the test
     (51) ``tol_r (sum_k ||r_k|| + tol_f)`` built from its terms r_k, and an
-    ``aux`` pytree (active set, multipliers...) handed to ``update``;
-``update(x, residual) -> (dx, floor)``
-    the Newton correction from the iteration matrix, and the round-off floor
-    of the residual at that iterate.
+    ``aux`` pytree (active set, multipliers...) handed to the two others;
+``linearise(x, residual) -> J``
+    the iteration matrix at x, factored (the expensive part: tangents and an
+    LU factorisation), or ``None`` where it is a precomputed constant;
+``correct(x, residual, J) -> (dx, floor)``
+    the Newton correction solved with J, and the round-off floor of the
+    residual at that iterate.
 
 The floor exists because when every term of a residual is exactly zero in exact
 arithmetic (rigid motion of an elastic body, a body at rest) the test (51)
@@ -19,6 +22,16 @@ a state that has converged.
 The loop is ``lax.while_loop``: compute r, stop if it passes, else solve and
 update (Algorithm 1, lines 11-19). Its iteration count is the number of linear
 solves; it is 0 when the starting residual already passes.
+
+Given a :class:`~nsga_jax.integrators.linalg.Factorisation` to start from,
+the loop is a *modified* Newton method that factors only when needed: it
+solves with the factorisation it holds (from an earlier iteration or step)
+and refactors at the current iterate when it holds none, or when an update
+made with it did not shrink the residual by :data:`CONTRACTION` (that update
+is then discarded). A fresh factorisation's update is always taken, as in
+Newton's method, so the iteration is never worse than Newton's; at small
+steps, where the matrix changes little, most iterations are one residual and
+one pair of triangular solves.
 """
 
 from __future__ import annotations
@@ -32,12 +45,34 @@ import jax.numpy as jnp
 from jax import lax
 
 from .._custom_types import Scalar
+from .linalg import Factorisation
+
+CONTRACTION = 0.1
+"""A held factorisation is kept while each of its updates divides the residual
+norm by at least 1/CONTRACTION (or reaches the tolerance)."""
 
 
 class Residual(NamedTuple):
     r: jax.Array
     bound: Scalar
     aux: Any
+
+
+class Problem(NamedTuple):
+    """The three functions of a Newton sub-problem (see the module docstring)."""
+
+    residual: Callable[[Any], Residual]
+    linearise: Callable[[Any, Residual], Any]
+    correct: Callable[[Any, Residual, Any], tuple[Any, Scalar]]
+
+    def update(self, x, res: Residual) -> tuple[Any, Scalar]:
+        """The Newton correction with the iteration matrix at x."""
+        return self.correct(x, res, self.linearise(x, res))
+
+    @classmethod
+    def from_update(cls, residual, update) -> "Problem":
+        """A problem whose correction always builds its own matrix (no reuse)."""
+        return cls(residual, lambda x, res: None, lambda x, res, _: update(x, res))
 
 
 class NewtonResult(eqx.Module):
@@ -47,6 +82,7 @@ class NewtonResult(eqx.Module):
     converged: jax.Array
     residual_norm: Scalar
     tolerance: Scalar
+    factorisation: Factorisation | None = None
 
 
 def convergence_bound(terms: list[jax.Array], tol_r: Scalar, tol_f: Scalar) -> Scalar:
@@ -56,31 +92,60 @@ def convergence_bound(terms: list[jax.Array], tol_r: Scalar, tol_f: Scalar) -> S
 
 
 def newton(
-    residual: Callable[[Any], Residual],
-    update: Callable[[Any, Residual], tuple[Any, Scalar]],
+    problem: Problem,
     x0: Any,
     max_iter: int | jax.Array,
-    floor0: Scalar | None = None,
+    factorisation: Factorisation | None = None,
 ) -> NewtonResult:
     """Run Newton until eq. 51 holds (with the round-off floor) or ``max_iter``.
 
-    A non-finite residual stops the loop at once and is reported as not converged.
+    With a ``factorisation`` (possibly the empty placeholder) the loop is the
+    modified Newton method of the module docstring, and the result carries the
+    factorisation it ends with. A non-finite residual stops the loop at once
+    and is reported as not converged.
     """
+    residual = problem.residual
     res0 = residual(x0)
-    floor0 = jnp.zeros((), res0.r.dtype) if floor0 is None else floor0
+    floor0 = jnp.zeros((), res0.r.dtype)
 
     def keep_going(carry):
-        _, res, floor, it = carry
+        _, res, floor, it = carry[:4]
         norm = jnp.linalg.norm(res.r)
         return (norm >= res.bound + floor) & (it < max_iter) & jnp.isfinite(norm)
 
+    def keep_going_reusing(carry):
+        _, res, floor, it, _, _, margin = carry
+        norm = jnp.linalg.norm(res.r)
+        return (norm >= margin * (res.bound + floor)) & (it < max_iter) & jnp.isfinite(norm)
+
     def body(carry):
         x, res, _, it = carry
-        dx, floor = update(x, res)
+        dx, floor = problem.update(x, res)
         x = jax.tree_util.tree_map(jnp.add, x, dx)
         return x, residual(x), floor, it + 1
 
-    x, res, floor, it = lax.while_loop(keep_going, body, (x0, res0, floor0, jnp.zeros((), jnp.int32)))
+    def body_reusing(carry):
+        x, res, floor, it, held, refactor, margin = carry
+        held = lax.cond(refactor, lambda: problem.linearise(x, res), lambda: held)
+        dx, new_floor = problem.correct(x, res, held)
+        x_new = jax.tree_util.tree_map(jnp.add, x, dx)
+        res_new = residual(x_new)
+        # an iterate of a held factorisation must pass the test with a margin: it
+        # converges linearly, where Newton's last iterate lands far below the test
+        new_margin = jnp.where(refactor, 1.0, CONTRACTION).astype(floor.dtype)
+        norm, norm_new = jnp.linalg.norm(res.r), jnp.linalg.norm(res_new.r)
+        contracted = (norm_new <= CONTRACTION * norm) | (norm_new < new_margin * (res_new.bound + new_floor))
+        take = contracted | refactor
+        x, res, floor, margin = jax.tree_util.tree_map(
+            lambda a, b: jnp.where(take, a, b), (x_new, res_new, new_floor, new_margin), (x, res, floor, margin))
+        return x, res, floor, it + 1, held, ~contracted, margin
+
+    zero = jnp.zeros((), jnp.int32)
+    if factorisation is None:
+        x, res, floor, it = lax.while_loop(keep_going, body, (x0, res0, floor0, zero))
+    else:
+        carry = (x0, res0, floor0, zero, factorisation, ~factorisation.valid, jnp.ones((), floor0.dtype))
+        x, res, floor, it, factorisation, _, _ = lax.while_loop(keep_going_reusing, body_reusing, carry)
     norm = jnp.linalg.norm(res.r)
     return NewtonResult(
         x=x,
@@ -89,6 +154,7 @@ def newton(
         converged=(norm < res.bound + floor) & jnp.isfinite(norm),
         residual_norm=norm,
         tolerance=res.bound + floor,
+        factorisation=factorisation,
     )
 
 
@@ -99,8 +165,10 @@ def _stop(tree):
     )
 
 
-def solve(builder, args: tuple, x0: Any, max_iter: int, differentiable: bool) -> NewtonResult:
-    """Newton on the sub-problem ``builder(*args) -> (residual, update)``.
+def solve(builder: Callable[..., Problem], args: tuple, x0: Any, max_iter: int, differentiable: bool,
+          factorisation: Factorisation | None = None) -> NewtonResult:
+    """Newton on the sub-problem ``builder(*args) -> Problem``, modified Newton
+    from ``factorisation`` when one is given (see :func:`newton`).
 
     With ``differentiable=False`` this is :func:`newton`. With ``True`` the
     Newton loop runs on stop-gradient copies of ``args`` (so no derivative ever
@@ -112,17 +180,17 @@ def solve(builder, args: tuple, x0: Any, max_iter: int, differentiable: bool) ->
 
     whose value is x* and whose derivative is -J^{-1} ∂R/∂θ: the implicit
     function theorem at x*, with the active set of x* frozen and J (built from
-    the stop-gradient arguments) held fixed. Its accuracy follows the Newton
-    tolerance, as x* does. The Newton iterations are never differentiated.
+    the stop-gradient arguments, always at x*, never a held factorisation) held
+    fixed. Its accuracy follows the Newton tolerance, as x* does. The Newton
+    iterations are never differentiated.
     """
     if not differentiable:
-        residual, update = builder(*args)
-        return newton(residual, update, x0, max_iter)
-    residual_sg, update_sg = builder(*_stop(args))
-    sol = newton(residual_sg, update_sg, _stop(x0), max_iter)
-    residual, _ = builder(*args)
+        return newton(builder(*args), x0, max_iter, factorisation)
+    problem_sg = builder(*_stop(args))
+    sol = newton(problem_sg, _stop(x0), max_iter, _stop(factorisation))
+    residual = builder(*args).residual
     x_star = sol.x
     res = residual(x_star)
-    dx, _ = update_sg(x_star, res._replace(aux=_stop(res.aux)))
+    dx, _ = problem_sg.update(x_star, res._replace(aux=_stop(res.aux)))
     x = jax.tree_util.tree_map(lambda a, d: a + (d - lax.stop_gradient(d)), x_star, dx)
     return eqx.tree_at(lambda s: (s.x, s.aux), sol, (x, residual(x).aux))

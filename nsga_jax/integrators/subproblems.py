@@ -1,7 +1,9 @@
 """The three sub-problems of the nonsmooth generalized-α schemes (paper §3.3).
 
-Each builder returns the pair ``(residual, update)`` that
-:func:`~nsga_jax.integrators.newton.newton` iterates:
+Each builder returns the :class:`~nsga_jax.integrators.newton.Problem`
+``(residual, linearise, correct)`` that :func:`~nsga_jax.integrators.newton.newton`
+iterates (``linearise`` is ``None``-valued where the model's structure makes
+the iteration matrix a precomputed constant):
 
 - :func:`smooth_problem` (eqs. 33-34, matrix 47): unknowns x = (ṽ, λ̃), the
   smooth velocity and the scaled bilateral multipliers, with v̇̃ and q̃ affine in
@@ -44,8 +46,8 @@ from .base import (
     tangents,
 )
 from .coefficients import GenAlphaCoefficients
-from .linalg import dense_solve, inverse_solve, solve_bordered
-from .newton import Residual, convergence_bound
+from .linalg import Factorisation, inverse_solve, solve_bordered
+from .newton import Problem, Residual, convergence_bound
 
 
 class Smooth(NamedTuple):
@@ -93,17 +95,22 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
         r = jnp.concatenate([inertia - f - reaction, r2])
         return Residual(r, convergence_bound([inertia, f, reaction, r2], tol_r, tol_f), mu)
 
-    def update(x, res):
-        vt, lam = x
+    def linearise(x, res):
+        if ops.smooth_inv is not None:
+            return None
+        vt, _ = x
         _, vd, q, v = state(vt)
         K, C, K_norm, C_norm = tangents(model, ops, q, v, t)
+        Ks = K + model.inertia_stiffness(q, vd) - curvature(model, q, pad_bilateral(model, res.aux))
+        return Factorisation.of(c_vd * mass_matrix(model, ops, q) + C + c_q * Ks, K_norm, C_norm)
+
+    def correct(x, res, fac):
+        vt, lam = x
+        _, vd, q, v = state(vt)
+        K_norm, C_norm = (ops.K_norm, ops.C_norm) if fac is None else (fac.K_norm, fac.C_norm)
         # v̇̃ = c_vd (ṽ - ṽ_pred) cancels: its round-off is eps c_vd ||M|| ||ṽ||
         floor = roundoff_floor(1.0, K_norm, C_norm, q, v, c_vd * mass_norm(model, ops, q) * jnp.linalg.norm(vt))
-        if ops.smooth_inv is not None:
-            solve = inverse_solve(ops.smooth_inv)
-        else:
-            Ks = K + model.inertia_stiffness(q, vd) - curvature(model, q, pad_bilateral(model, res.aux))
-            solve = dense_solve(c_vd * mass_matrix(model, ops, q) + C + c_q * Ks)
+        solve = inverse_solve(ops.smooth_inv) if fac is None else fac.solve
         if nb == 0:
             return (-solve(res.r), jnp.zeros((0,), vt.dtype)), floor
         GB = bilateral_jacobian(model, ops, q)
@@ -113,7 +120,7 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
                                   ks, ps, ops.smooth_inv_Gt)
         return (dv, dlam), floor
 
-    return residual, update
+    return Problem(residual, linearise, correct)
 
 
 def smooth_start(v_pred: Vector, nb: int):
@@ -155,29 +162,35 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
         return res._replace(aux=res.aux + (g, G))
 
-    def update(x, res):
+    def linearise(x, res):
+        if ops.position_inv is not None:
+            return None
+        U, _ = x
+        active, xi, _, _ = res.aux
+        q = smooth.q + U
+        # -d(g_q^{A T} ξ^A)/dq - h² df^p/dq; the penalty term is left to solve_bordered
+        mu = jnp.where(active, xi, 0.0)
+        A = mass_matrix(model, ops, smooth.q)
+        K_norm = C_norm = jnp.zeros((), q.dtype)
+        if with_forces:
+            K, _, K_norm, C_norm = tangents(model, ops, q, smooth.v, t)
+            mu = mu + h**2 * pad_bilateral(model, smooth.lam)
+            A = A + h**2 * K
+        return Factorisation.of(A - curvature(model, q, mu), K_norm, C_norm)
+
+    def correct(x, res, fac):
         U, nu = x
         active, xi, _, G = res.aux
         q = smooth.q + U
         floor = constraint_floor(kp, G, q)
-        K = None
         if with_forces:
-            K, _, K_norm, C_norm = tangents(model, ops, q, smooth.v, t)
+            K_norm, C_norm = (ops.K_norm, ops.C_norm) if fac is None else (fac.K_norm, fac.C_norm)
             floor = floor + roundoff_floor(h**2, K_norm, C_norm, q, smooth.v)
-        if ops.position_inv is not None:
-            solve = inverse_solve(ops.position_inv)
-        else:
-            # -d(g_q^{A T} ξ^A)/dq - h² df^p/dq; the penalty term is left to solve_bordered
-            mu = jnp.where(active, xi, 0.0)
-            A = mass_matrix(model, ops, smooth.q)
-            if with_forces:
-                mu = mu + h**2 * pad_bilateral(model, smooth.lam)
-                A = A + h**2 * K
-            solve = dense_solve(A - curvature(model, q, mu))
+        solve = inverse_solve(ops.position_inv) if fac is None else fac.solve
         dU, dnu = solve_bordered(solve, res.r[:n], res.r[n:], G, G, active, kp, pp, ops.position_inv_Gt)
         return (dU, dnu), floor
 
-    return residual, update
+    return Problem(residual, linearise, correct)
 
 
 def projection_start(model: Model, q: Vector):
@@ -225,21 +238,27 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
                                  unilateral, tol_r, tol_f)
         return res._replace(aux=res.aux + (gdot,))
 
-    def update(x, res):
+    def linearise(x, res):
+        if ops.velocity_inv is not None:
+            return None
+        W, _ = x
+        A = mass_matrix(model, ops, q)
+        if not with_forces:
+            zero = jnp.zeros((), q.dtype)
+            return Factorisation.of(A, zero, zero)
+        _, C, K_norm, C_norm = tangents(model, ops, q, smooth.v + W, t)
+        return Factorisation.of(A + h * C, K_norm, C_norm)
+
+    def correct(x, res, fac):
         W, Lam = x
         active = res.aux[0]
         v = smooth.v + W
-        C, floor = None, constraint_floor(kv, G, v)
+        floor = constraint_floor(kv, G, v)
         if with_forces:
-            _, C, K_norm, C_norm = tangents(model, ops, q, v, t)
+            K_norm, C_norm = (ops.K_norm, ops.C_norm) if fac is None else (fac.K_norm, fac.C_norm)
             floor = floor + roundoff_floor(h, K_norm, C_norm, q, v)
-        if ops.velocity_inv is not None:
-            solve = inverse_solve(ops.velocity_inv)
-        else:
-            A = mass_matrix(model, ops, q)
-            solve = dense_solve(A + h * C if with_forces else A)
+        solve = inverse_solve(ops.velocity_inv) if fac is None else fac.solve
         dW, dLam = solve_bordered(solve, res.r[:n], res.r[n:], G, G, active, kv, pv, ops.velocity_inv_Gt)
         return (dW, dLam), floor
 
-    return residual, update
-
+    return Problem(residual, linearise, correct)

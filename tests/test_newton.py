@@ -1,0 +1,139 @@
+"""The Newton loop: modified Newton from a held factorisation refactors only
+when an update converges too slowly, and gives what Newton's method gives."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import nsga_jax
+from nsga_jax import simulate
+from nsga_jax.integrators.linalg import Factorisation
+from nsga_jax.integrators.newton import Problem, Residual, newton
+from nsga_jax.scenes.base import REGISTRY, load_scene, make_scheme, parametrize
+
+N = 6
+RNG = np.random.default_rng(3)
+B = RNG.normal(size=(N, N))
+A = jnp.asarray(B @ B.T + N * np.eye(N))
+RHS = jnp.asarray(RNG.normal(size=N))
+TOL = 1e-12
+
+
+def cubic(strength: float) -> Problem:
+    """r(x) = A x + strength x³ - b, with its exact Jacobian."""
+
+    def residual(x):
+        r = A @ x + strength * x**3 - RHS
+        return Residual(r, jnp.asarray(TOL), None)
+
+    def linearise(x, res):
+        return Factorisation.of(A + jnp.diag(3 * strength * x**2), jnp.zeros(()), jnp.zeros(()))
+
+    def correct(x, res, fac):
+        return -fac.solve(res.r), jnp.zeros(())
+
+    return Problem(residual, linearise, correct)
+
+
+def run(problem, held=None, max_iter=50):
+    return jax.jit(lambda h: newton(problem, jnp.zeros(N), max_iter, h))(held)
+
+
+def test_modified_newton_finds_newtons_root_without_refactoring():
+    problem = cubic(0.05)
+    exact = run(problem)
+    held = problem.linearise(jnp.zeros(N), None)
+    reused = run(problem, held)
+    assert exact.converged and reused.converged
+    np.testing.assert_allclose(reused.x, exact.x, atol=1e-12)
+    assert reused.iterations > exact.iterations  # linear, not quadratic, convergence ...
+    np.testing.assert_array_equal(reused.factorisation.lu, held.lu)  # ... with the matrix it was given
+
+
+def test_modified_newton_factors_when_it_holds_nothing():
+    problem = cubic(0.05)
+    sol = run(problem, Factorisation.empty(N, jnp.float64))
+    assert sol.converged and bool(sol.factorisation.valid)
+    # factored once, at the starting point
+    np.testing.assert_allclose(sol.factorisation.lu, problem.linearise(jnp.zeros(N), None).lu)
+
+
+def test_a_poor_factorisation_is_replaced():
+    problem = cubic(0.05)
+    poor = Factorisation.of(10.0 * A, jnp.zeros(()), jnp.zeros(()))  # updates 10 times too short
+    sol = run(problem, poor)
+    assert sol.converged
+    np.testing.assert_allclose(sol.x, run(problem).x, atol=1e-12)
+    assert not np.allclose(sol.factorisation.lu, poor.lu)
+
+
+def test_a_diverging_update_is_discarded():
+    """With a factorisation of the wrong sign, the first update grows the
+    residual: it is discarded and the matrix refactored at the same (starting)
+    iterate, which then serves to the end."""
+    problem = cubic(0.05)
+    wrong = Factorisation.of(-A, jnp.zeros(()), jnp.zeros(()))
+    sol = run(problem, wrong)
+    assert sol.converged
+    np.testing.assert_allclose(sol.x, run(problem).x, atol=1e-12)
+    np.testing.assert_allclose(sol.factorisation.lu, problem.linearise(jnp.zeros(N), None).lu)
+    assert sol.iterations == run(problem, problem.linearise(jnp.zeros(N), None)).iterations + 1
+
+
+@pytest.mark.parametrize("name", sorted(REGISTRY))
+def test_reused_subproblems_are_those_left_non_constant(name):
+    """A scheme holds a factorisation exactly for the sub-problems whose
+    iteration matrix ``prepare`` does not invert once."""
+    scene = load_scene(name)
+    for scheme in (nsga_jax.DS(reuse_min_dof=0), nsga_jax.DSn(reuse_min_dof=0)):
+        ops = scheme.prepare(scene.model, 1e-3, 0.0)
+        constant = (ops.smooth_inv is not None, ops.position_inv is not None, ops.velocity_inv is not None)
+        has_jumps = scene.model.n_constraints > 0
+        expected = (not constant[0], has_jumps and not constant[1], has_jumps and not constant[2])
+        assert scheme.reused(scene.model) == expected
+        state = scheme.init(scene.model, 0.0, scene.q0, scene.v0)
+        if any(expected):
+            assert [f is not None for f in state.factorisations] == list(expected)
+        else:
+            assert state.factorisations is None
+    assert dataclasses.replace(nsga_jax.DS(reuse_min_dof=0), fast_paths=False).reused(scene.model) == (False,) * 3
+
+
+def test_reuse_gives_the_trajectory_of_newtons_method():
+    """Rigid box (contacts, a non-constant mass): with factorisations reused
+    between iterations and steps, at a tight tolerance, the trajectory and
+    active sets are those of a fresh factorisation at every iteration."""
+    scene = load_scene("rigid_box", {"t_end": 0.3})
+    base = dataclasses.replace(scene.scheme(), tol_r=1e-10, tol_f=1e-10)
+    args = (0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0)
+    reused = simulate(scene.model, dataclasses.replace(base, reuse_min_dof=0), *args)
+    fresh = simulate(scene.model, dataclasses.replace(base, reuse_min_dof=10**9), *args)
+    assert len(reused.failed_steps) == len(fresh.failed_steps) == 0
+    assert reused.records.active_velocity.any()
+    np.testing.assert_array_equal(reused.records.active_velocity, fresh.records.active_velocity)
+    for x, y in ((reused.q, fresh.q), (reused.v, fresh.v)):
+        np.testing.assert_allclose(x, y, rtol=0, atol=1e-8 * np.abs(y).max())
+
+
+def test_gradients_with_reused_factorisations():
+    """The implicit derivative is built at x* with a fresh matrix, so reusing
+    factorisations in the iterations leaves the gradient unchanged (at a tight
+    tolerance: x*, and so the gradient, follow the Newton tolerance)."""
+    overrides = {"h": 1e-3}
+    scene = load_scene("rigid_pendulum", overrides)
+    params, build = parametrize("rigid_pendulum", overrides, ["length"])
+    grads = []
+    for min_dof in (0, 10**9):
+        scheme = dataclasses.replace(make_scheme(scene.solver), reuse_min_dof=min_dof, tol_r=1e-10, tol_f=1e-10)
+
+        def loss(p, scheme=scheme):
+            model, q0, v0, observe = build(p)
+            traj = nsga_jax.trajectory(model, scheme, 0.0, 1e-3, 1500, q0, v0)
+            return jnp.mean(observe(traj)["x"] ** 2)
+
+        grads.append(float(jax.jit(jax.grad(loss))(params)["length"]))
+    assert abs(grads[1]) > 1e-8
+    np.testing.assert_allclose(grads[0], grads[1], rtol=1e-6)
