@@ -34,3 +34,17 @@ def test_schur_solve_equals_full_bordered_solve(mask, symmetric):
         dx, dmu = solve_bordered(solve, jnp.asarray(r1), jnp.asarray(r2), jnp.asarray(Gu), jnp.asarray(Gl),
                                  jnp.asarray(a), k, p, pre)
         np.testing.assert_allclose(np.concatenate([dx, dmu]), expected, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("b", [0, 1, 2])
+def test_band_product_equals_the_dense_product(b):
+    from nsga_jax.integrators.linalg import band_matrix, band_product
+
+    rng = np.random.default_rng(b)
+    n = 9
+    A = rng.normal(size=(n, n))
+    A[np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > b] = 0.0
+    x = rng.normal(size=n)
+    band = band_matrix(jnp.asarray(A), b)
+    assert band.shape == (2 * b + 1, n)
+    np.testing.assert_allclose(band_product(band, jnp.asarray(x)), A @ x, rtol=1e-14, atol=1e-14)

@@ -62,6 +62,8 @@ def test_generic_path_keeps_nothing_constant():
     assert all(getattr(ops, f.name) is None for f in dataclasses.fields(ops))
     ops = scene.scheme().prepare(scene.model, 1e-3, 0.0)
     assert ops.smooth_inv is not None and ops.position_inv is not None and ops.velocity_inv is not None
+    # the 201-node bar's M and K are tridiagonal: its products with them are done on the band
+    assert scene.model.bandwidth == 1 and ops.M_band.shape == ops.K_band.shape == (3, 201)
 
 
 def test_no_recompilation_when_only_h_or_parameters_change():

@@ -13,6 +13,7 @@ import abc
 import dataclasses
 import math
 from collections.abc import Callable
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -22,6 +23,7 @@ from .._custom_types import Matrix, Scalar, ScalarLike, Vector
 from .._util import as_float
 from ..models.base import Model
 from ..results import Result
+from .linalg import band_matrix, band_product
 from .newton import NewtonResult, Residual, convergence_bound
 
 ROUNDOFF_FACTOR = 64.0
@@ -105,6 +107,19 @@ class Operators(eqx.Module):
     position_inv_Gt: jax.Array | None
     velocity_inv: Matrix | None
     velocity_inv_Gt: jax.Array | None
+    M_band: jax.Array | None = None
+    K_band: jax.Array | None = None
+    C_band: jax.Array | None = None
+
+
+def banded(model: Model) -> bool:
+    """Whether a model's constant M and K are worked with on their band: a
+    linear model with constant mass that declares a half-bandwidth b with
+    2b + 1 <= n / 8 (a 1D chain); wider bands gain nothing over the dense or
+    element-by-element products."""
+    b = model.bandwidth
+    return (b is not None and model.constant_mass and model.linear_force
+            and 8 * (2 * b + 1) <= model.n_dof)
 
 
 TopLeft = Callable[[Matrix, Matrix, Matrix], Matrix]
@@ -155,9 +170,14 @@ def constant_operators(
     p_inv, p_Gt = invert(position if nc else None, position_needs_constant_G, slice(0, nc))
     v_inv, v_Gt = invert(velocity if nc else None, velocity_needs_constant_G, slice(0, nc))
     M_norm = None if M is None else jnp.linalg.norm(M)
+    bands = {}
+    if banded(model):
+        b = model.bandwidth
+        bands = {"M_band": band_matrix(M, b), "K_band": band_matrix(K, b),
+                 "C_band": band_matrix(C, b) if model.velocity_dependent_force else None}
     return Operators(M=M, M_norm=M_norm, K=K, C=C, K_norm=K_norm, C_norm=C_norm, G=G,
                      smooth_inv=s_inv, smooth_inv_Gt=s_Gt, position_inv=p_inv, position_inv_Gt=p_Gt,
-                     velocity_inv=v_inv, velocity_inv_Gt=v_Gt)
+                     velocity_inv=v_inv, velocity_inv_Gt=v_Gt, **bands)
 
 
 class Scaling(eqx.Module):
@@ -190,10 +210,39 @@ def tangents(model: Model, ops: Operators, q: Vector, v: Vector, t: Scalar):
     return K, C, jnp.linalg.norm(K), jnp.linalg.norm(C)
 
 
-def force_change(model: Model, q, v, f_ref, t) -> Vector:
-    """f(q, v, t) - f_ref. Evaluating f (element assembly, O(n)) is cheaper than a
-    dense tangent product; the round-off it leaves is what the Newton floor covers."""
-    return model.force(q, v, t) - f_ref
+class ForceAt(NamedTuple):
+    """The force f = f(q, v, t) evaluated at one point (q, v) at the step's time t."""
+
+    q: Vector
+    v: Vector
+    f: Vector
+
+
+def force_at(model: Model, q: Vector, v: Vector, t: Scalar) -> ForceAt:
+    return ForceAt(q, v, model.force(q, v, t))
+
+
+def force_change(model: Model, ops: Operators, ref: ForceAt, q: Vector, v: Vector, t: Scalar) -> Vector:
+    """f(q, v, t) - ref.f at the same time t. Evaluating f (element assembly, O(n))
+    is cheaper than a dense tangent product; the round-off it leaves is what the
+    Newton floor covers. A banded linear model (ops.K_band) uses its exact
+    difference -K (q - ref.q) - C (v - ref.v) on the band instead."""
+    if ops.K_band is None:
+        return model.force(q, v, t) - ref.f
+    df = -band_product(ops.K_band, q - ref.q)
+    if ops.C_band is not None:
+        df = df - band_product(ops.C_band, v - ref.v)
+    return df
+
+
+def force_near(model: Model, ops: Operators, ref: ForceAt, q: Vector, v: Vector, t: Scalar) -> Vector:
+    """f(q, v, t), from ``ref`` and :func:`force_change` for a banded linear model."""
+    return model.force(q, v, t) if ops.K_band is None else ref.f + force_change(model, ops, ref, q, v, t)
+
+
+def mass_product(model: Model, ops: Operators, q: Vector, x: Vector) -> Vector:
+    """M(q) @ x, on the band for a banded linear model."""
+    return model.mass_product(q, x) if ops.M_band is None else band_product(ops.M_band, x)
 
 
 def constraint_jacobian(model: Model, ops: Operators, q: Vector) -> jax.Array:

@@ -35,6 +35,7 @@ from .base import (
     consistent_acceleration,
     constant_operators,
     constraint_jacobian,
+    force_at,
     make_output,
     result_code,
 )
@@ -163,7 +164,7 @@ class DS(AbstractGenAlpha):
                               result_code([sol_s]))
             return self.finalise(t, qt, vt, vd, a_pred, kept([sol_s], state)), out
 
-        f_smooth = model.force(qt, vt, t) if self.nonsmooth_forces else None
+        f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
         sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces),
                       projection_start(model, qt), self.max_iter, diff, held[1])

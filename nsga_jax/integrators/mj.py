@@ -36,6 +36,7 @@ from .base import (
     is_unilateral,
     make_output,
     mass_matrix,
+    mass_product,
     restitution,
     result_code,
     roundoff_floor,
@@ -118,7 +119,7 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
     def residual(x):
         v, Lam = x
         q = position(v)
-        inertia = model.mass_product(q, v - v_n)
+        inertia = mass_product(model, ops, q, v - v_n)
         force = h * (theta * model.force(q, v, t) + (1.0 - theta) * f_n)
         if model.n_constraints == 0:
             return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())

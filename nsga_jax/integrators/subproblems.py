@@ -28,6 +28,7 @@ import jax.numpy as jnp
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
 from .base import (
+    ForceAt,
     Operators,
     Scaling,
     augmented_residual,
@@ -36,10 +37,13 @@ from .base import (
     constraint_jacobian,
     convective,
     curvature,
+    force_at,
     force_change,
+    force_near,
     is_unilateral,
     mass_matrix,
     mass_norm,
+    mass_product,
     pad_bilateral,
     restitution,
     roundoff_floor,
@@ -74,6 +78,7 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
     n, nb = model.n_dof, model.n_bilateral
     ks = ps = Scaling.of(model, h).ks
     c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
+    f_pred = force_at(model, q_pred, v_pred, t) if ops.K_band is not None else None
 
     def state(vt):
         qt = q_pred + c_q * (vt - v_pred)
@@ -84,8 +89,8 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
     def residual(x):
         vt, lam = x
         _, vd, q, v = state(vt)
-        f = model.force(q, v, t)
-        inertia = model.mass_product(q, vd)
+        f = force_near(model, ops, f_pred, q, v, t)
+        inertia = mass_product(model, ops, q, vd)
         if nb == 0:
             return Residual(inertia - f, convergence_bound([inertia, f], tol_r, tol_f), jnp.zeros((0,), q.dtype))
         GB = bilateral_jacobian(model, ops, q)
@@ -136,10 +141,10 @@ def smooth_motion(co: GenAlphaCoefficients, h: Scalar, q_pred: Vector, v_pred: V
 
 
 def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth,
-                     f_smooth: Vector | None, with_forces: bool):
+                     f_smooth: ForceAt | None, with_forces: bool):
     """Step 2: residual [M(q̃) U - h² f^p - g_q^{A T} ξ^A;  -kp g^A;  -(kp²/pp) ν^{Ā}]
     with ξ = kp ν - pp g(q), A = bilaterals ∪ {ξ_j >= 0}; ``aux = (A, ξ, g, g_q)``.
-    ``with_forces=False`` drops h² f^p (eq. 31b)."""
+    ``f_smooth``: the force at the smooth motion; ``with_forces=False`` drops h² f^p (eq. 31b)."""
     tol_r, tol_f, _ = tol
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
@@ -147,7 +152,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     GB_smooth = bilateral_jacobian(model, ops, smooth.q) if (with_forces and nb and ops.G is None) else None
 
     def f_p(q, G):
-        fp = force_change(model, q, smooth.v, f_smooth, t)
+        fp = force_change(model, ops, f_smooth, q, smooth.v, t)
         if GB_smooth is not None:
             fp = fp + (G[:nb] - GB_smooth).T @ smooth.lam  # (g_q^T - g̃_q^T) λ̃, eq. 29
         return fp
@@ -157,7 +162,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         q = smooth.q + U
         g = model.constraints(q)
         G = constraint_jacobian(model, ops, q)
-        inertia = model.mass_product(smooth.q, U)
+        inertia = mass_product(model, ops, smooth.q, U)
         force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
         res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
         return res._replace(aux=res.aux + (g, G))
@@ -199,7 +204,7 @@ def projection_start(model: Model, q: Vector):
 
 
 def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,
-                     candidates: jax.Array, f_smooth: Vector | None, G_prev_v_prev: jax.Array,
+                     candidates: jax.Array, f_smooth: ForceAt | None, G_prev_v_prev: jax.Array,
                      with_forces: bool):
     """Step 3: residual [M(q) W - h f* - g_q^{B T} σ^B;  -kv ġ^B;  -(kv²/pv) Λ^{B̄}] with
     ġ = g_q v + e g_{q,n} v_n, σ = kv Λ - pv ġ, B = bilaterals ∪ {j ∈ A : σ_j >= 0};
@@ -221,7 +226,7 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if not model.constant_mass:
             f_const = f_const - (model.mass_product(q, smooth.vd) - model.mass_product(smooth.q, smooth.vd))
         if not model.velocity_dependent_force:  # f(q, v) - f(q̃, ṽ) does not change with W
-            f_const = f_const + force_change(model, q, smooth.v, f_smooth, t)
+            f_const = f_const + force_change(model, ops, f_smooth, q, smooth.v, t)
 
     def residual(x):
         W, Lam = x
@@ -230,11 +235,11 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if with_forces:
             f_star = f_const
             if model.velocity_dependent_force:
-                f_star = f_star + force_change(model, q, v, f_smooth, t)
+                f_star = f_star + force_change(model, ops, f_smooth, q, v, t)
             force = h * f_star
         else:
             force = jnp.zeros_like(W)
-        res = augmented_residual(model.mass_product(q, W), force, G, gdot, Lam, kv, pv, candidates,
+        res = augmented_residual(mass_product(model, ops, q, W), force, G, gdot, Lam, kv, pv, candidates,
                                  unilateral, tol_r, tol_f)
         return res._replace(aux=res.aux + (gdot,))
 

@@ -46,6 +46,10 @@ class ElasticBar(Model):
         return self.n_elements + 1
 
     @property
+    def bandwidth(self) -> int:
+        return 1  # two-node elements on consecutive dofs: M and K are tridiagonal
+
+    @property
     def mbar(self) -> Scalar:
         return self.rho * self.area * self.length
 

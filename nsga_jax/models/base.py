@@ -121,6 +121,14 @@ class Model(eqx.Module):
         return False
 
     @property
+    def bandwidth(self) -> int | None:
+        """Half-bandwidth b of M, K and C when they are banded (``A[i, j] = 0``
+        for ``|i - j| > b``, as in a 1D chain of elements), ``None`` otherwise.
+        A linear model with a narrow band has its products with M and K done
+        on the band (:func:`~nsga_jax.integrators.linalg.band_product`)."""
+        return None
+
+    @property
     @abc.abstractmethod
     def mbar(self) -> Scalar | float:
         """Characteristic mass m̄ [kg] used to scale the multipliers (paper §3.3.6)."""
