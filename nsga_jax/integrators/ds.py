@@ -15,6 +15,9 @@ What a model does not need is left out at trace time: no multiplier block
 without bilateral constraints, no position/velocity sub-problem without
 constraints, and for a model with a constant mass and a linear force the
 iteration matrices are inverted once per step size, outside the time loop.
+Larger nonlinear models keep the LU factors of their iteration matrices in
+the state (:attr:`StepState.factorisations`) and refactor only when an update
+made with them converges too slowly (:func:`~nsga_jax.integrators.newton.newton`).
 """
 
 from __future__ import annotations

@@ -114,9 +114,13 @@ def newton(
         return (norm >= res.bound + floor) & (it < max_iter) & jnp.isfinite(norm)
 
     def keep_going_reusing(carry):
-        _, res, floor, it, _, _, margin = carry
+        _, res, floor, it, _, stalled, margin = carry
         norm = jnp.linalg.norm(res.r)
-        return (norm >= margin * (res.bound + floor)) & (it < max_iter) & jnp.isfinite(norm)
+        tolerance = res.bound + floor
+        # an iterate that passes eq. 51 but not the margin is final once the held
+        # factorisation stops contracting (the residual is then at round-off)
+        done = (norm < margin * tolerance) | (stalled & (norm < tolerance))
+        return ~done & (it < max_iter) & jnp.isfinite(norm)
 
     def body(carry):
         x, res, _, it = carry
