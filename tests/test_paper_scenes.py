@@ -59,6 +59,6 @@ def test_flexible_cube_impact_window(h):
 
 @pytest.mark.slow
 def test_flexible_cube_paper_run():
-    sol = load_scene("flexible_cube", {"h": 1e-4}).run()  # T = 0.3 s, about 2 minutes
+    sol = load_scene("flexible_cube", {"h": 1e-4}).run()  # T = 0.3 s, about 30 s on 2 cores
     check_clean(sol, penetration_tol=1e-6 * 0.1)
     assert sol.observables["x1_uz"].min() == pytest.approx(-0.3, abs=2e-3)  # falls onto the floor
