@@ -10,7 +10,6 @@ runs (compile excluded) and compile time.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import time
 from pathlib import Path
@@ -19,6 +18,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from nsga_jax.scenes import load_scene  # noqa: E402
 from nsga_jax.studies import MODES, run_step_sizes  # noqa: E402
+from nsga_jax.tables import write_csv  # noqa: E402
 
 SWEEPS = {
     ("bouncing_ball", "narrow"): ({"t_end": 2.0}, [1e-3, 1.25e-3, 1.5e-3, 2e-3]),
@@ -48,10 +48,7 @@ def main() -> None:
             print(f"{name:14s} {sweep:6s} {mode:8s} runs {r['run_s']:.3f} s, total with host work {total:.3f} s",
                   flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "bench_batch_h.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(args.out / "bench_batch_h.csv", rows)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,6 @@ Writes ``fast_paths.csv`` and ``fast_paths.md``.
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import os
 from pathlib import Path
@@ -29,6 +28,7 @@ import numpy as np  # noqa: E402
 
 from nsga_jax import simulate  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
+from nsga_jax.tables import write_csv  # noqa: E402
 
 WINDOWS = {
     "bouncing_ball": {"t_end": 1.0},
@@ -67,10 +67,7 @@ def main() -> None:
         print(f"{name}: fast {r['fast_us_per_step']:.1f} us, generic {r['generic_us_per_step']:.1f} us "
               f"({r['speedup']:.2f}x), difference {diff:.1e}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "fast_paths.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(args.out / "fast_paths.csv", rows)
     lines = ["| scene | n | h [s] | steps | fast µs/step | generic µs/step | generic / fast | max rel. difference |",
              "|---|---|---|---|---|---|---|---|"]
     lines += [f"| {r['scene']} | {r['n_dof']} | {r['h']:g} | {r['steps']} | {r['fast_us_per_step']:.1f} | "

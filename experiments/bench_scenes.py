@@ -23,7 +23,6 @@ Writes ``bench_scenes.csv`` and ``bench_scenes.md`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import platform
 from pathlib import Path
@@ -35,18 +34,13 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402, F401
+from nsga_jax.bench import CASES as BENCH_CASES  # noqa: E402
 from nsga_jax.bench import per_call  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
+from nsga_jax.tables import write_csv  # noqa: E402
 
-CASES = {
-    "bouncing_ball": {"h": 1e-3},
-    "rigid_pendulum": {"h": 1e-3},
-    "impacting_bar": {"h": 1e-3},
-    "rigid_box": {"h": 1e-3},
-    "flexible_pendulum": {"h": 1e-4},
-    # the paper's cube at its middle step, over a window that covers the impact
-    "flexible_cube": {"h": 3e-5, "t_end": 0.006, "height": 0.0505, "velocity": -2.43},
-}
+# the package's benchmark cases, with the cube at the paper's middle step over its impact window
+CASES = {**BENCH_CASES, "flexible_cube": {**BENCH_CASES["flexible_cube"], "h": 3e-5}}
 
 
 def parts(scene, repeats: int) -> dict:
@@ -128,11 +122,7 @@ def main() -> None:
     print(header)
     print(table)
     args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "bench_scenes.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]) + ["device"])
-        w.writeheader()
-        for r in rows:
-            w.writerow({**r, "device": device})
+    write_csv(args.out / "bench_scenes.csv", [{**r, "device": device} for r in rows])
     (args.out / "bench_scenes.md").write_text(header + "\n\n" + table + "\n")
 
 

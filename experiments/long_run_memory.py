@@ -11,11 +11,12 @@ Each run is a fresh process, which reports its own peak resident set size
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import subprocess
 import sys
 from pathlib import Path
+
+from nsga_jax.tables import write_csv
 
 CHILD = """
 import json, resource
@@ -41,10 +42,7 @@ def main() -> None:
             rows.append(row)
             print(row, flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "long_run_memory.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(args.out / "long_run_memory.csv", rows)
     lines = ["| record_every | steps | records kept | failed steps | max penetration [m] | wall [s] | peak RSS [MB] |",
              "|---|---|---|---|---|---|---|"]
     for r in rows:

@@ -22,7 +22,6 @@ Writes ``siconos.csv`` and ``siconos.md``.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import subprocess
 import sys
@@ -36,6 +35,7 @@ import numpy as np  # noqa: E402
 from nsga_jax.exact import bouncing_ball  # noqa: E402
 from nsga_jax.metrics import relative_l1_error  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
+from nsga_jax.tables import write_csv  # noqa: E402
 
 SYSTEM_PYTHON = "/usr/bin/python3"
 INSTALL = "sudo apt install python3-siconos"
@@ -144,17 +144,11 @@ def main() -> None:
                     print(f"{name} h={h:g} {code:12s} {us:8.1f} us/step  "
                           + "  ".join(f"{k} {v:.2e}" for k, v in errs.items()), flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    columns: list[str] = []
-    for r in rows:
-        columns += [c for c in r if c not in columns]
-    with open(args.out / "siconos.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns)
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(args.out / "siconos.csv", rows)
     lines = []
     for name in CASES:
         mine = [r for r in rows if r["problem"] == name]
-        errs = [c for c in columns if c.startswith("error_") and c in mine[0]]
+        errs = [c for c in mine[0] if c.startswith("error_")]
         lines += [f"**{name}**", "", "| h [s] | code | µs/step | " + " | ".join(e[6:] for e in errs) + " |",
                   "|---|---|---|" + "---|" * len(errs)]
         for r in mine:

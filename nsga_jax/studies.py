@@ -10,7 +10,6 @@ writes them as CSV and PNG (:func:`write_study`).
 
 from __future__ import annotations
 
-import csv
 import math
 import time
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from .batch import simulate_batch  # noqa: E402
 from .metrics import observed_order, relative_l1_error  # noqa: E402
 from .results import ConfigError  # noqa: E402
 from .scenes.base import Scene, load_scene  # noqa: E402
+from .tables import write_csv  # noqa: E402
 
 MODES = ("grouped", "padded", "separate")
 
@@ -199,13 +199,7 @@ def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Refe
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out_dir / "study.csv"}
-    flat = [r.flat() for r in rows]
-    keys = list(dict.fromkeys(k for f in flat for k in f))
-    with open(paths["csv"], "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for f in flat:
-            w.writerow(f)
+    write_csv(paths["csv"], [r.flat() for r in rows])
     schemes = list(dict.fromkeys(r.scheme for r in rows))
     names = list(rows[0].errors)
     order = slopes(rows)

@@ -20,7 +20,6 @@ eq. 52 error of its observables (on the recorded steps, at most
 
 from __future__ import annotations
 
-import csv
 import itertools
 import json
 import math
@@ -39,6 +38,7 @@ from .batch import BatchRun, member_mesh, member_solution, stack_models
 from .metrics import relative_l1_error
 from .results import ConfigError, Result
 from .scenes.base import Scene, load_scene
+from .tables import read_csv, write_csv
 
 MEMORY_BUDGET = 2**25
 """Recorded numbers a batch keeps in memory (256 MiB in float64); the default
@@ -329,7 +329,7 @@ def sweep(
         batch = mems[k * batch_size:(k + 1) * batch_size]
         path = None if out_dir is None else out_dir / "batches" / f"batch_{k:05d}.csv"
         if path is not None and path.exists():
-            rows = _read_csv(path)
+            rows = read_csv(path)
         else:
             rows, compile_time, wall = _batch_rows(batch, padded, mesh, max_records)
             result.compile_time += compile_time
@@ -337,7 +337,7 @@ def sweep(
             for r in rows:
                 r["batch"], r["batch_wall_s"] = k, wall
             if path is not None and jax.process_index() == 0:
-                _write_csv(path, rows)
+                write_csv(path, rows)
             if on_batch is not None:
                 on_batch(k, rows)
         result.rows.extend(rows)
@@ -345,7 +345,7 @@ def sweep(
             _progress(k + 1, n_batches, len(result.rows), len(mems), time.perf_counter() - t_start)
     if out_dir is not None and jax.process_index() == 0:
         result.path = out_dir / "sweep.csv"
-        _write_csv(result.path, result.rows)
+        write_csv(result.path, result.rows)
         result.plot = plot_sweep(result, out_dir / "sweep.png")
     return result
 
@@ -365,30 +365,6 @@ def _claim(out_dir: Path, scene, grid, hs, overrides, batch_size: int, n: int) -
     if jax.process_index() == 0:  # one writer when several hosts share the directory
         (out_dir / "batches").mkdir(parents=True, exist_ok=True)
         manifest.write_text(json.dumps(spec, indent=2) + "\n")
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    columns: list[str] = []
-    for r in rows:
-        columns += [c for c in r if c not in columns]
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns)
-        w.writeheader()
-        w.writerows(rows)
-    tmp.replace(path)
-
-
-def _read_csv(path: Path) -> list[dict]:
-    def value(text: str):
-        try:
-            x = float(text)
-        except ValueError:
-            return text
-        return int(x) if x.is_integer() and "." not in text and "e" not in text.lower() else x
-
-    with open(path, newline="") as f:
-        return [{k: value(v) for k, v in r.items()} for r in csv.DictReader(f)]
 
 
 def _progress(done: int, total: int, members_done: int, members: int, elapsed: float) -> None:
