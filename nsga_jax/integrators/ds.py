@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._custom_types import Scalar, ScalarLike, Vector
@@ -114,15 +115,14 @@ class DS(AbstractGenAlpha):
     def reused(self, model: Model) -> tuple[bool, bool, bool]:
         """Which sub-problems (smooth, position, velocity) keep a factorisation
         between steps: those whose iteration matrix :meth:`prepare` does not
-        invert once, in models of at least ``reuse_min_dof`` coordinates."""
+        invert once, in models of at least ``reuse_min_dof`` coordinates.
+        (Read from the structure of ``prepare``'s result, traced abstractly.)"""
         if not self.fast_paths or model.n_dof < self.reuse_min_dof:
             return False, False, False
-        constant_K = model.constant_mass and model.linear_force
-        smooth = constant_K and (model.n_bilateral == 0 or model.linear_constraints)
-        position = constant_K and model.linear_constraints
-        velocity = constant_K
+        ops = jax.eval_shape(lambda h: self.prepare(model, h, 0.0), 1.0)
         has_jumps = model.n_constraints > 0
-        return not smooth, has_jumps and not position, has_jumps and not velocity
+        return (ops.smooth_inv is None, has_jumps and ops.position_inv is None,
+                has_jumps and ops.velocity_inv is None)
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
         state = super().init(model, t0, q0, v0)

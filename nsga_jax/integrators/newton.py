@@ -114,12 +114,13 @@ def newton(
         return (norm >= res.bound + floor) & (it < max_iter) & jnp.isfinite(norm)
 
     def keep_going_reusing(carry):
-        _, res, floor, it, _, stalled, margin = carry
+        _, res, floor, it, _, refactor, margin = carry
         norm = jnp.linalg.norm(res.r)
         tolerance = res.bound + floor
         # an iterate that passes eq. 51 but not the margin is final once the held
-        # factorisation stops contracting (the residual is then at round-off)
-        done = (norm < margin * tolerance) | (stalled & (norm < tolerance))
+        # factorisation stops contracting (refactor set; the residual is then at
+        # round-off), rather than refactoring to improve a converged iterate
+        done = (norm < margin * tolerance) | (refactor & (norm < tolerance))
         return ~done & (it < max_iter) & jnp.isfinite(norm)
 
     def body(carry):
