@@ -12,6 +12,7 @@ import pytest
 from nsga_jax import simulate
 from nsga_jax.bench import COLUMNS, bench
 from nsga_jax.integrators.base import output_template
+from nsga_jax.integrators.linalg import band_product
 from nsga_jax.scenes import load_scene
 
 WINDOWS = {
@@ -64,6 +65,9 @@ def test_generic_path_keeps_nothing_constant():
     assert ops.smooth_inv is not None and ops.position_inv is not None and ops.velocity_inv is not None
     # the 201-node bar's M and K are tridiagonal: its products with them are done on the band
     assert scene.model.bandwidth == 1 and ops.M_band.shape == ops.K_band.shape == (3, 201)
+    x = np.random.default_rng(0).normal(size=201)
+    np.testing.assert_allclose(band_product(ops.M_band, x), ops.M @ x, rtol=1e-13, atol=1e-13 * np.abs(ops.M).max())
+    np.testing.assert_allclose(band_product(ops.K_band, x), ops.K @ x, rtol=0, atol=1e-13 * np.abs(ops.K @ x).max())
 
 
 def test_no_recompilation_when_only_h_or_parameters_change():
