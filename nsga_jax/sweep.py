@@ -36,7 +36,7 @@ import numpy as np
 from ._simulate import RunTotals, Solution, _cast, _float64_view, _n_steps, precision
 from .batch import BatchRun, member_mesh, member_solution, stack_models
 from .metrics import relative_l1_error
-from .results import ConfigError, Result
+from .results import ConfigError
 from .scenes.base import Scene, load_scene
 from .tables import read_csv, write_csv
 
@@ -172,7 +172,7 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
         q0 = np.stack([s.q0 for s in scenes]).astype(dtype)
         v0 = np.stack([s.v0 for s in scenes]).astype(dtype)
         run = BatchRun(model, scheme, 0.0, q0, v0, hs.astype(dtype), n_steps, mesh=mesh)
-        totals = _BatchTotals(len(scenes))
+        totals = [RunTotals() for _ in batch]  # every step's statistics, whatever the records keep
         kept, masks = [], []
         start = 0
         for out, done in run.chunks():
@@ -181,7 +181,8 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
             cols = keep.any(axis=0)
             kept.append(jax.tree_util.tree_map(lambda x: x[:, cols], out))
             masks.append(keep[:, cols])
-            totals.add(out, done, step)
+            for b, member_totals in enumerate(totals):  # a member's steps are a prefix of the chunk
+                member_totals.add(jax.tree_util.tree_map(lambda x: x[b][done[b]], out), first_step=start + 1)
             start += done.shape[1]
     records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept)
     mask = np.concatenate(masks, axis=1)
@@ -190,58 +191,9 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
         scene = member.scene
         mine = jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)
         sol = member_solution(scene.model, [mine], 0.0, scene.q0.astype(dtype), scene.v0.astype(dtype),
-                              float(hs[b]), int(n_steps[b]), run, totals=totals.member(b))
+                              float(hs[b]), int(n_steps[b]), run, totals=totals[b])
         rows.append(_row(member, sol))
     return rows, run.compile_time, run.wall_time
-
-
-class _BatchTotals:
-    """:class:`~nsga_jax._simulate.RunTotals` of every member of a batch at once."""
-
-    def __init__(self, B: int):
-        self.steps = np.zeros(B, int)
-        self.it_sum = np.zeros((B, 3))
-        self.it_max = np.zeros((B, 3), int)
-        self.solves_sum = np.zeros(B)
-        self.solves_max = np.zeros(B, int)
-        self.failed: list[list[int]] = [[] for _ in range(B)]
-        self.first_failure = np.zeros(B, int)
-        self.min_gap = np.full(B, np.inf)
-        self.max_bilateral = np.zeros(B)
-        self.max_bilateral_rate = np.zeros(B)
-
-    def add(self, out, done: np.ndarray, step: np.ndarray) -> None:
-        it = np.where(done[..., None], np.asarray(out.iterations), 0)
-        self.steps += done.sum(axis=1)
-        self.it_sum += it.sum(axis=1)
-        self.it_max = np.maximum(self.it_max, it.max(axis=1))
-        solves = it.sum(axis=2)
-        self.solves_sum += solves.sum(axis=1)
-        self.solves_max = np.maximum(self.solves_max, solves.max(axis=1))
-        result = np.asarray(out.result)
-        bad = done & (result != Result.successful)
-        for b in np.nonzero(bad.any(axis=1))[0]:
-            if not self.failed[b]:
-                self.first_failure[b] = int(result[b][bad[b]][0])
-            self.failed[b].extend(step[bad[b]].tolist())
-
-        def masked(x, fill, reduce):
-            x = np.asarray(x)
-            if x.shape[-1] == 0:
-                return np.full(len(done), fill)
-            return reduce(np.where(done[..., None], x, fill), axis=(1, 2))
-
-        self.min_gap = np.minimum(self.min_gap, masked(out.gap, np.inf, np.min))
-        self.max_bilateral = np.maximum(self.max_bilateral, masked(np.abs(out.bilateral), 0.0, np.max))
-        self.max_bilateral_rate = np.maximum(self.max_bilateral_rate, masked(np.abs(out.bilateral_rate), 0.0, np.max))
-
-    def member(self, b: int) -> RunTotals:
-        return RunTotals(n_steps=int(self.steps[b]), iterations_sum=self.it_sum[b], iterations_max=self.it_max[b],
-                         solves_sum=float(self.solves_sum[b]), solves_max=int(self.solves_max[b]),
-                         failed=self.failed[b], first_result=int(self.first_failure[b]),
-                         min_gap=float(self.min_gap[b]),
-                         max_bilateral=float(self.max_bilateral[b]),
-                         max_bilateral_rate=float(self.max_bilateral_rate[b]))
 
 
 def _row(member: Member, sol: Solution) -> dict[str, Any]:
