@@ -135,6 +135,11 @@ def bench(
     for d in dtypes:
         if d not in ("float64", "float32"):
             raise ConfigError(f"dtype must be 'float64' or 'float32', got {d!r}")
+    for name, value in (("repeats", repeats), ("max_steps", max_steps)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
+    if not max_seconds > 0:
+        raise ConfigError(f"max_seconds must be in (0, inf), got {max_seconds!r}")
     path = None
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)

@@ -149,6 +149,14 @@ def _run(args) -> int:
     return 0
 
 
+def _step_sizes(text: str) -> list[float]:
+    """``--h``: comma-separated step sizes (their ranges are the scene's to check)."""
+    try:
+        return [float(h) for h in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"--h expects comma-separated numbers, got {text!r}") from None
+
+
 def _convergence(args) -> int:
     from .studies import make_reference, study, write_study
 
@@ -159,10 +167,7 @@ def _convergence(args) -> int:
     for s in schemes + [args.ref_scheme]:
         if s not in ("ds", "dsn", "cs", "mj"):
             raise ConfigError(f"scheme must be one of ds, dsn, cs, mj, got {s!r}")
-    try:
-        hs = [float(h) for h in args.h.split(",")]
-    except ValueError:
-        raise ConfigError(f"--h expects comma-separated numbers, got {args.h!r}") from None
+    hs = _step_sizes(args.h)
     scene = load_scene(args.scene, overrides)  # validates everything before anything runs
     for h in hs:
         load_scene(args.scene, {**overrides, "h": h})
@@ -255,7 +260,7 @@ def _sweep(args) -> int:
     from .sweep import parse_grid, sweep
 
     grid = parse_grid(args.grid)
-    hs = None if args.h is None else [float(x) for x in args.h.split(",")]
+    hs = None if args.h is None else _step_sizes(args.h)
     devices = jax.devices() if args.devices is None else jax.devices()[: args.devices]
     if args.devices is not None and not 1 <= args.devices <= len(jax.devices()):
         raise ConfigError(f"--devices must be in [1, {len(jax.devices())}], got {args.devices}")

@@ -13,6 +13,7 @@ from nsga_jax import simulate
 from nsga_jax.bench import COLUMNS, bench
 from nsga_jax.integrators.base import output_template
 from nsga_jax.integrators.linalg import band_product
+from nsga_jax.results import ConfigError
 from nsga_jax.scenes import load_scene
 
 WINDOWS = {
@@ -117,3 +118,15 @@ def test_record_template_matches_the_step(name, scheme):
     state = sch.init(model, 0.0, scene.q0, scene.v0)
     traced = jax.eval_shape(lambda s: sch.step(model, ops, s, 1e-3)[1], state)
     assert traced == output_template(model, state.q.dtype)
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"repeats": 0}, "repeats must be an integer >= 1"),
+    ({"max_steps": 0}, "max_steps must be an integer >= 1"),
+    ({"max_seconds": -1.0}, r"max_seconds must be in \(0, inf\)"),
+    ({"batches": [0]}, "batch sizes must be integers >= 1"),
+    ({"dtypes": ["float16"]}, "dtype must be"),
+])
+def test_bad_bench_settings_are_refused_by_name(settings, message):
+    with pytest.raises(ConfigError, match=message):
+        bench(["bouncing_ball"], **{"batches": [1], "dtypes": ["float64"], **settings}, progress=False)

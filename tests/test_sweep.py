@@ -158,3 +158,8 @@ def test_bad_sweep_settings():
         sweep("bouncing_ball", {"e": [0.5]}, devices=[])
     with pytest.raises(ConfigError, match="batch_size"):
         sweep("bouncing_ball", {"e": [0.5]}, batch_size=0)
+
+
+def test_cli_sweep_refuses_a_bad_step_size(tmp_path, capsys):
+    assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--h", "abc", "--out", str(tmp_path / "s")]) == 2
+    assert "--h expects comma-separated numbers" in capsys.readouterr().err
