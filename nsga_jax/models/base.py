@@ -125,7 +125,10 @@ class Model(eqx.Module):
         """Half-bandwidth b of M, K and C when they are banded (``A[i, j] = 0``
         for ``|i - j| > b``, as in a 1D chain of elements), ``None`` otherwise.
         A linear model with a narrow band has its products with M and K done
-        on the band (:func:`~nsga_jax.integrators.linalg.band_product`)."""
+        on the band (:func:`~nsga_jax.integrators.linalg.band_product`), so a
+        declared band the matrices do not have gives wrong products: declare
+        it from the element-to-dof map (the bar's test checks its band against
+        the assembled M and K)."""
         return None
 
     @property
