@@ -61,7 +61,7 @@ class RigidBody(Model):
 
     @property
     def n_unilateral(self) -> int:
-        return self.points.shape[0] if self.contact else 0
+        return self.points.shape[-2] if self.contact else 0
 
     @property
     def mbar(self) -> Scalar:

@@ -46,7 +46,7 @@ class HexSolid(Model):
 
     @property
     def n_nodes(self) -> int:
-        return self.reference_nodes.shape[0]
+        return self.reference_nodes.shape[-2]
 
     @property
     def n_dof(self) -> int:
