@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nsga_jax.batch import broadcast_members
 from nsga_jax.cli import main
 from nsga_jax.metrics import relative_l1_error
 from nsga_jax.results import ConfigError
-from nsga_jax.batch import broadcast_members
 from nsga_jax.scenes import REGISTRY, load_scene
 from nsga_jax.sweep import parse_grid, sweep
 
