@@ -25,24 +25,38 @@ class HexSolid(Model):
         contact_nodes: node indices in contact with the floor (static).
         E, nu, rho: Young's modulus [Pa], Poisson's ratio, density [kg/m³].
         gravity [m/s²], floor_z [m], e: restitution (shared by every contact).
+        shape_gradients: dN/dX at each element's Gauss points (E, 8, 8, 3) [1/m], and
+            volumes: their integration weights (E, 8) [m³]; both derived from
+            ``reference_nodes`` at construction (build a new model to change
+            the mesh), so that no force evaluation recomputes the geometry.
     """
 
-    reference_nodes: jax.Array = eqx.field(converter=as_float)
-    E: Scalar = eqx.field(converter=as_float)
-    nu: Scalar = eqx.field(converter=as_float)
-    rho: Scalar = eqx.field(converter=as_float)
-    gravity: Scalar = eqx.field(converter=as_float)
-    floor_z: Scalar = eqx.field(converter=as_float)
-    e: Scalar = eqx.field(converter=as_float)
+    reference_nodes: jax.Array
+    E: Scalar
+    nu: Scalar
+    rho: Scalar
+    gravity: Scalar
+    floor_z: Scalar
+    e: Scalar
 
     ranges = {"E": POSITIVE, "nu": Range(-1.0, 0.5, lo_open=True, hi_open=True), "rho": POSITIVE,
               "e": UNIT_INTERVAL}
     connectivity: StaticIndex = eqx.field(static=True)
     contact_nodes: StaticIndex = eqx.field(static=True)
+    shape_gradients: jax.Array
+    volumes: jax.Array
 
     constant_mass = True
     velocity_dependent_force = False
     linear_constraints = True
+
+    def __init__(self, reference_nodes, E, nu, rho, gravity, floor_z, e, connectivity: StaticIndex,
+                 contact_nodes: StaticIndex):
+        self.reference_nodes = as_float(reference_nodes)
+        self.E, self.nu, self.rho = as_float(E), as_float(nu), as_float(rho)
+        self.gravity, self.floor_z, self.e = as_float(gravity), as_float(floor_z), as_float(e)
+        self.connectivity, self.contact_nodes = connectivity, contact_nodes
+        self.shape_gradients, self.volumes = jax.vmap(hex8_geometry)(self.reference_nodes[connectivity.array])
 
     @property
     def n_nodes(self) -> int:
@@ -62,14 +76,13 @@ class HexSolid(Model):
         dofs = StaticIndex((3 * conn[:, :, None] + np.arange(3)[None, None, :]).reshape(len(conn), 24))
         lam, mu = lame(self.E, self.nu)
         ne = len(conn)
-        dNdX, dV = jax.vmap(hex8_geometry)(self.reference_nodes[conn])
-        params = (dNdX, dV, lam * jnp.ones(ne), mu * jnp.ones(ne), self.rho * jnp.ones(ne))
+        params = (self.shape_gradients, self.volumes, lam * jnp.ones(ne), mu * jnp.ones(ne), self.rho * jnp.ones(ne))
         return ElementGroup(dofs=dofs, params=params)
 
     @property
     def mbar(self) -> Scalar:
         """Total mass ρ V [kg]."""
-        return self.rho * jnp.sum(self.elements.params[1])
+        return self.rho * jnp.sum(self.volumes)
 
     def reference(self) -> Vector:
         return self.reference_nodes.reshape(-1)
