@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from .compilation_cache import ENV, default_cache_dir, use_compilation_cache
 from .output import chunk_writer, summary, write_run
 from .results import ConfigError, ConvergenceError
 from .scenes import REGISTRY, load_scene, parse_override
@@ -14,8 +15,13 @@ from .scenes import REGISTRY, load_scene, parse_override
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="nsga-jax", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
+    cached = argparse.ArgumentParser(add_help=False)
+    cached.add_argument("--no-cache", action="store_true",
+                        help="compile afresh and keep nothing on disk (default: compiled programs are kept in "
+                             f"${ENV} or ~/.cache/nsga_jax/xla, and a later run of the same scene structure, "
+                             "with any h and parameter values, loads them instead of compiling)")
 
-    run = sub.add_parser("run", help="simulate a built-in scene or a TOML config")
+    run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=[cached])
     run.add_argument("scene", help="scene name (see `nsga-jax scenes`) or path to a .toml config")
     run.add_argument("--h", type=float, help="step size [s]")
     run.add_argument("--t-end", type=float, help="end time [s]")
@@ -33,7 +39,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--chunk", type=int, default=None, help="steps per compiled chunk")
     run.add_argument("--quiet", action="store_true", help="no progress output")
 
-    conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size")
+    conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size",
+                          parents=[cached])
     conv.add_argument("scene", help="scene name or .toml config")
     conv.add_argument("--scheme", default="ds", help="comma-separated schemes (ds, dsn, cs, mj)")
     conv.add_argument("--h", required=True, help="comma-separated step sizes [s]")
@@ -50,7 +57,7 @@ def _parser() -> argparse.ArgumentParser:
     conv.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_convergence)")
 
     ident = sub.add_parser("identify", help="fit scene parameters to measured (or synthetic) motion by "
-                                            "gradient descent through the simulation")
+                                            "gradient descent through the simulation", parents=[cached])
     ident.add_argument("scene", help="scene name or .toml config")
     ident.add_argument("--params", required=True, help="comma-separated float parameters to identify, e.g. E,e")
     source = ident.add_mutually_exclusive_group(required=True)
@@ -78,7 +85,7 @@ def _parser() -> argparse.ArgumentParser:
     ident.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_identify)")
 
     sw = sub.add_parser("sweep", help="run a scene for every combination of parameter values and step sizes "
-                                      "(batched, split over every device, resumable)")
+                                      "(batched, split over every device, resumable)", parents=[cached])
     sw.add_argument("scene", help="scene name or .toml config")
     sw.add_argument("--grid", required=True,
                     help="swept float parameters, e.g. 'e=0:1:11,E=800:1000:5' (start:stop:count) or 'e=0.2;0.5'")
@@ -307,6 +314,8 @@ def _scenes() -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if hasattr(args, "no_cache"):
+        use_compilation_cache(None if args.no_cache else default_cache_dir())
     try:
         if args.command == "run":
             return _run(args)

@@ -1,6 +1,9 @@
 """The command line: run writes trajectory, summary and plots; bad input exits 2."""
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +36,32 @@ def test_run_writes_results(tmp_path, capsys):
     assert (out / "iterations.png").stat().st_size > 1000
     assert not (out / "partial").exists()
     assert "500 steps" in capsys.readouterr().out
+
+
+def _cli(args: list[str], cache) -> dict:
+    env = {**os.environ, "NSGA_JAX_CACHE": str(cache)}
+    proc = subprocess.run([sys.executable, "-m", "nsga_jax.cli", *args, "--quiet"], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = Path(args[args.index("--out") + 1])
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_later_runs_load_compiled_programs_from_the_cache(tmp_path):
+    cache = tmp_path / "cache"
+    first = _cli(["run", "bouncing_ball", "--t-end", "0.5", "--out", str(tmp_path / "a")], cache)
+    entries = sorted(p.name for p in cache.iterdir())
+    assert any(e.startswith("jit__run_chunk") for e in entries)
+    assert any(e.startswith("jit__prepare_and_init") for e in entries)
+    # another process, another h and restitution: the same programs, loaded
+    second = _cli(["run", "bouncing_ball", "--t-end", "0.5", "--h", "2e-3", "--set", "e=0.5",
+                   "--out", str(tmp_path / "b")], cache)
+    assert sorted(p.name for p in cache.iterdir()) == entries
+    assert second["n_steps"] == 250 and first["n_steps"] == 500
+    # --no-cache neither reads nor writes it
+    _cli(["run", "bouncing_ball", "--t-end", "0.5", "--dtype", "float32", "--no-cache",
+          "--out", str(tmp_path / "c")], cache)
+    assert sorted(p.name for p in cache.iterdir()) == entries
 
 
 def test_chunks_are_written_as_they_finish(tmp_path):

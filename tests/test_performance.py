@@ -99,7 +99,7 @@ def test_bench_writes_its_table(tmp_path):
     assert len(rows) == len(table) == 4
     assert set(COLUMNS) <= set(table[0])
     for r in rows:
-        assert r["us_per_step"] > 0 and r["compile_s"] > 0 and r["steps"] == 200
+        assert r["us_per_step"] > 0 and r["compile_s"] > 0 and r["compile_cached_s"] > 0 and r["steps"] == 200
         assert r["member_steps_per_s"] == pytest.approx(r["batch"] * 1e6 / r["us_per_step"])
     f32 = [r for r in rows if r["dtype"] == "float32"]
     assert all(0 < r["float32_error"] < 1e-4 for r in f32)
