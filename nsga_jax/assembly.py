@@ -7,6 +7,7 @@ vectors and matrices are assembled by scatter-add over the element-to-dof map.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -76,7 +77,7 @@ class ElementGroup(eqx.Module):
 
     def forces(self, fn: ElementForce, q: Vector, v: Vector, n: int) -> Vector:
         """Assembled element forces, shape (n,)."""
-        fe = jax.vmap(fn)(self.gather(q), self.gather(v), self.params)
+        fe = _vmapped(fn)(self.gather(q), self.gather(v), self.params)
         return scatter_vector(self.dofs, fe, n)
 
     def tangents(
@@ -85,11 +86,11 @@ class ElementGroup(eqx.Module):
         """Assembled K = -df/dq and C = -df/dv from element-level ``jacfwd``
         (C is not formed, and returned as zeros, when ``velocity_dependent`` is False)."""
         xe, ve = self.gather(q), self.gather(v)
-        Ke = -jax.vmap(jax.jacfwd(fn, argnums=0))(xe, ve, self.params)
+        Ke = -_vmapped_jacobian(fn, 0)(xe, ve, self.params)
         K = scatter_matrix(self.dofs, Ke, n)
         if not velocity_dependent:
             return K, jnp.zeros_like(K)
-        Ce = -jax.vmap(jax.jacfwd(fn, argnums=1))(xe, ve, self.params)
+        Ce = -_vmapped_jacobian(fn, 1)(xe, ve, self.params)
         return K, scatter_matrix(self.dofs, Ce, n)
 
     def matrix_product(self, fn: Callable[[Any], jax.Array], x: Vector) -> Vector:
@@ -100,6 +101,24 @@ class ElementGroup(eqx.Module):
     def matrix(self, fn: Callable[[Any], jax.Array], n: int) -> Matrix:
         """Assembled element matrices ``fn(params_e)`` (e.g. mass), shape (n, n)."""
         return scatter_matrix(self.dofs, jax.vmap(fn)(self.params), n)
+
+
+# A step evaluates the same element force (and its Jacobian) in several places
+# (residuals, tangents, predictor). Behind one jit per element function, each is
+# traced once per shape and reused; XLA inlines the calls, so the compiled code
+# is the same, and tracing a beam or hex step takes about half the time.
+
+
+@functools.cache
+def _vmapped(fn: ElementForce):
+    """``fn`` over a group's elements."""
+    return jax.jit(jax.vmap(fn))
+
+
+@functools.cache
+def _vmapped_jacobian(fn: ElementForce, argnums: int):
+    """The Jacobian of ``fn`` in its argument ``argnums``, over a group's elements."""
+    return jax.jit(jax.vmap(jax.jacfwd(fn, argnums=argnums)))
 
 
 def scatter_vector(dofs: StaticIndex, values: jax.Array, n: int) -> Vector:
