@@ -13,7 +13,7 @@ from ..elements.rigid_body import (
     angular_velocity,
     frame,
     natural_mass_matrix,
-    point_position,
+    point_heights,
     rigidity_constraints,
 )
 from .base import POSITIVE, UNIT_INTERVAL, Model
@@ -79,7 +79,7 @@ class RigidBody(Model):
     def unilateral(self, q: Vector) -> jax.Array:
         if not self.contact:
             return jnp.zeros((0,), q.dtype)
-        return jax.vmap(lambda X: point_position(q, X)[2])(self.points) - self.floor_z
+        return point_heights(q, self.points) - self.floor_z
 
     @property
     def restitution(self) -> jax.Array:
