@@ -268,7 +268,8 @@ def _n_steps(t0: float, t1: float, h: float) -> int:
 def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
     """Up to ``length`` steps of ``scheme`` in one ``while_loop``, writing each
     step's record (packed in two vectors, :func:`pack_output`) into buffers of
-    ``length`` records. The loop stops after step
+    ``length`` records, returned as they are (the host unpacks them into
+    views, :func:`unpack_outputs`). The loop stops after step
     ``n_steps`` (or after a failure when ``stop_on_failure``); the buffer's
     unused tail is marked not done and dropped by the caller. The step count is
     a traced value, so runs with another h (another number of steps) reuse the
@@ -290,7 +291,7 @@ def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
         return i + 1, state, k + 1, stopped | (failed & stop_on_failure), buffer
 
     i, state, k, stopped, buffer = lax.while_loop(going, body, (jnp.zeros((), k.dtype), state, k, stopped, buffer))
-    return (state, k, stopped), (unpack_outputs(*buffer, template), jnp.arange(length) < i)
+    return (state, k, stopped), (buffer, jnp.arange(length) < i)
 
 
 def chunk_length(model: Model) -> int:
@@ -453,6 +454,7 @@ def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress,
     wall = time.perf_counter() - tw
 
     carry = (state, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
+    template = output_template(model, state.q.dtype)
     consts = (jnp.asarray(h), jnp.asarray(n_steps), jnp.asarray(throw))
     tc = time.perf_counter()
     run = _run_chunk_jit.lower(model, scheme, ops, carry, *consts, length).compile()
@@ -464,11 +466,11 @@ def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress,
     steps_done = 0
     for k in range(n_chunks):
         tw = time.perf_counter()
-        carry, (out, done) = run(model, scheme, ops, carry, *consts, length)
-        jax.block_until_ready((carry, out, done))
+        carry, (packed, done) = run(model, scheme, ops, carry, *consts, length)
+        jax.block_until_ready((carry, packed, done))
         wall += time.perf_counter() - tw
-        out, done = jax.device_get((out, done))
-        out = jax.tree_util.tree_map(lambda x: x[done], out)
+        packed, done = jax.device_get((packed, done))
+        out = jax.tree_util.tree_map(lambda x: x[done], unpack_outputs(*packed, template))
         if on_chunk is not None:
             on_chunk(k, out)
         first = steps_done + 1

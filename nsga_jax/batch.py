@@ -109,15 +109,17 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
     way round: its trip count and the record index are then shared by all
     members (a ``while_loop`` under ``vmap`` would carry, and select, the whole
     record buffer at every step). A member past its ``n_steps`` keeps its state.
-    Records come out as (B, length, ...) with the mask of steps taken (B, length).
+    Records come out packed (:func:`pack_output`), as float and integer buffers
+    (B, length, fields), with the mask of steps taken (B, length); the host
+    unpacks them (:func:`unpack_outputs` on NumPy arrays makes views, where
+    unpacking here would copy every record once more).
     """
     state, k, stopped = carry
     step = jax.vmap(lambda m, s, o, st, hh: s.step(m, o, st, hh))
-    template = output_template(model, state.q.dtype)
-    n_float, n_int = packed_sizes(template)
+    n_float, n_int = packed_sizes(output_template(model, state.q.dtype))
     B = len(h)
-    buffer = (jnp.zeros((length, B, n_float), state.q.dtype), jnp.zeros((length, B, n_int), jnp.int32))
-    mask = jnp.zeros((length, len(h)), bool)
+    buffer = (jnp.zeros((B, length, n_float), state.q.dtype), jnp.zeros((B, length, n_int), jnp.int32))
+    mask = jnp.zeros((B, length), bool)
 
     def going(c):
         i, _, k, stopped, _, _ = c
@@ -130,14 +132,13 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
         state = jax.tree_util.tree_map(
             lambda a, b: jnp.where(do.reshape(-1, *([1] * (a.ndim - 1))), a, b), new_state, state)
         packed = jax.vmap(pack_output)(out)
-        buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 0) for b, x in zip(buffer, packed))
-        mask = lax.dynamic_update_index_in_dim(mask, do, i, 0)
+        buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 1) for b, x in zip(buffer, packed))
+        mask = lax.dynamic_update_index_in_dim(mask, do, i, 1)
         return i + 1, state, k + do.astype(k.dtype), stopped, buffer, mask
 
     init = (jnp.zeros((), jnp.int32), state, k, stopped, buffer, mask)
     _, state, k, stopped, buffer, mask = lax.while_loop(going, body, init)
-    records = unpack_outputs(*(jnp.swapaxes(b, 0, 1) for b in buffer), template)
-    return (state, k, stopped), (records, mask.T)
+    return (state, k, stopped), (buffer, mask)
 
 
 @functools.cache
@@ -214,6 +215,7 @@ class BatchRun:
         jax.block_until_ready(self._carry)
         self.wall_time = time.perf_counter() - tw
         self._args = (args[0], args[1])
+        self._template = output_template(model, self._carry[0].q.dtype)
         self._consts = _place((np.asarray(hs), np.asarray(n_steps, dtype=np.int32)), mesh)
         tc = time.perf_counter()
         self._run = self._run.lower(*self._args, self._ops, self._carry, *self._consts).compile()
@@ -226,10 +228,11 @@ class BatchRun:
     def chunks(self) -> Iterator[tuple[StepOutput, np.ndarray]]:
         for _ in range(self.n_chunks):
             tw = time.perf_counter()
-            self._carry, (out, done) = self._run(*self._args, self._ops, self._carry, *self._consts)
-            jax.block_until_ready((self._carry, out, done))
+            self._carry, (packed, done) = self._run(*self._args, self._ops, self._carry, *self._consts)
+            jax.block_until_ready((self._carry, packed, done))
             self.wall_time += time.perf_counter() - tw
-            yield _to_host((out, done))
+            packed, done = _to_host((packed, done))
+            yield unpack_outputs(*packed, self._template), done
 
 
 def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float, n_steps_requested: int,

@@ -411,9 +411,11 @@ def packed_sizes(template: StepOutput) -> tuple[int, int]:
             sum(math.prod(x.shape) for x in leaves if not _is_float(x)))
 
 
-def unpack_outputs(floats: jax.Array, ints: jax.Array, template: StepOutput) -> StepOutput:
+def unpack_outputs(floats, ints, template: StepOutput) -> StepOutput:
     """Records (..., fields) packed by :func:`pack_output` back into a
-    :class:`StepOutput` with the leading axes of ``floats``, typed as ``template``."""
+    :class:`StepOutput` with the leading axes of ``floats``, typed as ``template``.
+    On NumPy arrays the floating-point fields are views (nothing is copied):
+    the time loops return their packed buffers and unpack them on the host."""
     lead = floats.shape[:-1]
     offsets = {True: 0, False: 0}
     leaves = []
@@ -423,7 +425,8 @@ def unpack_outputs(floats: jax.Array, ints: jax.Array, template: StepOutput) -> 
         source = floats if kind else ints
         part = source[..., offsets[kind]:offsets[kind] + size]
         offsets[kind] += size
-        leaves.append(part.reshape(*lead, *spec.shape).astype(spec.dtype))
+        part = part.reshape(*lead, *spec.shape)
+        leaves.append(part if part.dtype == spec.dtype else part.astype(spec.dtype))
     return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(template), leaves)
 
 
