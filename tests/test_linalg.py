@@ -48,3 +48,30 @@ def test_band_product_equals_the_dense_product(b):
     band = band_matrix(jnp.asarray(A), b)
     assert band.shape == (2 * b + 1, n)
     np.testing.assert_allclose(band_product(band, jnp.asarray(x)), A @ x, rtol=1e-14, atol=1e-14)
+
+
+def test_tridiagonal_solve_equals_the_dense_solve():
+    from nsga_jax.integrators.linalg import Tridiagonal, band_matrix
+
+    rng = np.random.default_rng(3)
+    n = 11
+    A = rng.normal(size=(n, n)) + 4.0 * np.eye(n)
+    A[np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > 1] = 0.0
+    solve = inverse_solve(Tridiagonal(band_matrix(jnp.asarray(A), 1)))
+    x, X = rng.normal(size=n), rng.normal(size=(n, 2))
+    np.testing.assert_allclose(solve(jnp.asarray(x)), np.linalg.solve(A, x), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(solve(jnp.asarray(X)), np.linalg.solve(A, X), rtol=1e-12, atol=1e-13)
+
+
+def test_the_bar_solves_its_constant_matrices_on_their_diagonals():
+    from nsga_jax.integrators.linalg import Tridiagonal
+    from nsga_jax.scenes import load_scene
+
+    scene = load_scene("impacting_bar")
+    ops = scene.scheme().prepare(scene.model, 1e-3, 0.0)
+    for inverse in (ops.smooth_inv, ops.position_inv, ops.velocity_inv):
+        assert isinstance(inverse, Tridiagonal) and inverse.band.shape == (3, scene.model.n_dof)
+    G = np.asarray(ops.G)
+    A = np.asarray(ops.M) + 1e-6 * np.asarray(ops.K)  # DS's position matrix M + h² K
+    np.testing.assert_allclose(ops.position_inv_Gt, np.linalg.solve(A, G.T), rtol=1e-10,
+                               atol=1e-12 * np.abs(np.linalg.solve(A, G.T)).max())

@@ -23,7 +23,7 @@ from .._custom_types import Matrix, Scalar, ScalarLike, Vector
 from .._util import as_float
 from ..models.base import Model
 from ..results import Result
-from .linalg import band_matrix, band_product
+from .linalg import Tridiagonal, band_matrix, band_product, inverse_solve
 from .newton import NewtonResult, Residual, convergence_bound
 
 ROUNDOFF_FACTOR = 64.0
@@ -91,7 +91,9 @@ class Operators(eqx.Module):
     Each field is ``None`` when the model's structure does not make it
     constant: M (constant mass), K and C (linear force), G (affine
     constraints), and the inverses of the iteration matrices of the smooth,
-    position and velocity sub-problems with the products A^{-1} G^T they need.
+    position and velocity sub-problems with the products A^{-1} G^T they need
+    (for a chain of half-bandwidth 1, the matrices' diagonals instead of their
+    dense inverses: :class:`~nsga_jax.integrators.linalg.Tridiagonal`).
     """
 
     M: Matrix | None
@@ -101,11 +103,11 @@ class Operators(eqx.Module):
     K_norm: Scalar | None
     C_norm: Scalar | None
     G: jax.Array | None
-    smooth_inv: Matrix | None
+    smooth_inv: Matrix | Tridiagonal | None
     smooth_inv_Gt: jax.Array | None
-    position_inv: Matrix | None
+    position_inv: Matrix | Tridiagonal | None
     position_inv_Gt: jax.Array | None
-    velocity_inv: Matrix | None
+    velocity_inv: Matrix | Tridiagonal | None
     velocity_inv_Gt: jax.Array | None
     M_band: jax.Array | None = None
     K_band: jax.Array | None = None
@@ -159,11 +161,14 @@ def constant_operators(
         K_norm, C_norm = jnp.linalg.norm(K), jnp.linalg.norm(C)
     G = model.constraint_jacobian(zeros) if (model.linear_constraints and nc > 0) else None
 
+    tridiagonal = banded(model) and model.bandwidth == 1
+
     def invert(top_left, needs_G, rows):
         if top_left is None or M is None or K is None or (needs_G and G is None):
             return None, None
-        inv = jnp.linalg.inv(top_left(M, K, C))
-        inv_Gt = inv @ G[rows].T if (G is not None and len(range(*rows.indices(nc)))) else None
+        A = top_left(M, K, C)
+        inv = Tridiagonal(band_matrix(A, 1)) if tridiagonal else jnp.linalg.inv(A)
+        inv_Gt = inverse_solve(inv)(G[rows].T) if (G is not None and len(range(*rows.indices(nc)))) else None
         return inv, inv_Gt
 
     s_inv, s_Gt = invert(smooth, smooth_needs_constant_G and nb > 0, slice(0, nb))

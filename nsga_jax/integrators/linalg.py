@@ -33,8 +33,31 @@ Solve = Callable[[jax.Array], jax.Array]
 """``X -> A^{-1} X`` for X of shape (n,) or (n, m)."""
 
 
-def inverse_solve(inverse: jax.Array) -> Solve:
-    """Solve with a precomputed inverse (a constant matrix factorised once)."""
+class Tridiagonal(eqx.Module):
+    """A constant tridiagonal matrix (the iteration matrix of a chain with
+    half-bandwidth 1), kept as its diagonals and solved by LAPACK's tridiagonal
+    elimination at every use: O(n) per solve, where a product with the dense
+    inverse is O(n²) (6 µs against about 1 µs for the 201-node bar).
+
+    Attributes:
+        band: :func:`band_matrix` of the matrix with b = 1, shape (3, n):
+            sub-, main and super-diagonal.
+    """
+
+    band: jax.Array
+
+    def solve(self, rhs: jax.Array) -> jax.Array:
+        """A^{-1} rhs for rhs of shape (n,) or (n, m)."""
+        x = rhs if rhs.ndim == 2 else rhs[:, None]
+        y = jax.lax.linalg.tridiagonal_solve(self.band[0], self.band[1], self.band[2], x)
+        return y if rhs.ndim == 2 else y[:, 0]
+
+
+def inverse_solve(inverse: "jax.Array | Tridiagonal") -> Solve:
+    """Solve with a constant matrix factorised once: its dense inverse, or
+    its diagonals (:class:`Tridiagonal`)."""
+    if isinstance(inverse, Tridiagonal):
+        return inverse.solve
     return lambda rhs: inverse @ rhs
 
 
