@@ -36,8 +36,11 @@ Solve = Callable[[jax.Array], jax.Array]
 class Tridiagonal(eqx.Module):
     """A constant tridiagonal matrix (the iteration matrix of a chain with
     half-bandwidth 1), kept as its diagonals and solved by LAPACK's tridiagonal
-    elimination at every use: O(n) per solve, where a product with the dense
-    inverse is O(n²) (6 µs against about 1 µs for the 201-node bar).
+    elimination at every use: O(n) work and memory per solve, where a product
+    with the dense inverse is O(n²). For the 201-node bar, one solve costs about
+    the same as the dense product (6.2 against 6.7 µs, call overhead
+    dominating), but a batch of 64 members' solves 360 against 570 µs: the
+    batch no longer streams 64 dense inverses through memory.
 
     Attributes:
         band: :func:`band_matrix` of the matrix with b = 1, shape (3, n):
