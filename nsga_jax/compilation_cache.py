@@ -49,8 +49,8 @@ def use_compilation_cache(path: str | Path | None) -> Path | None:
         path = Path(path).expanduser().resolve()
         path.mkdir(parents=True, exist_ok=True)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_SECONDS)
+        jax.config.update("jax_enable_compilation_cache", True)
     jax.config.update("jax_compilation_cache_dir", None if path is None else str(path))
-    jax.config.update("jax_enable_compilation_cache", path is not None)
     _jax_cache.reset_cache()
     return path
 
