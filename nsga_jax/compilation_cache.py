@@ -8,7 +8,8 @@ from disk instead. This is JAX's own persistent cache
 (``jax_compilation_cache_dir``), pointed at a folder of ours. A scene's
 programs take a few MB; the folder is never pruned (delete it at will).
 
-The command line turns it on for every command; the folder is
+The command line turns it on for run, convergence, identify and sweep
+(`--no-cache` turns it off there); the folder is
 ``$NSGA_JAX_CACHE`` if set (``off`` turns the cache off), else
 ``$XDG_CACHE_HOME/nsga_jax/xla`` (``~/.cache/nsga_jax/xla``). In Python, call
 :func:`use_compilation_cache`. The folder holds compiled machine code: keep it
