@@ -92,8 +92,8 @@ class Operators(eqx.Module):
     constant: M (constant mass), K and C (linear force), G (affine
     constraints), and the inverses of the iteration matrices of the smooth,
     position and velocity sub-problems with the products A^{-1} G^T they need
-    (for a chain of half-bandwidth 1, the matrices' diagonals instead of their
-    dense inverses: :class:`~nsga_jax.integrators.linalg.Tridiagonal`).
+    (for a chain of half-bandwidth 1, a block elimination of the tridiagonal
+    matrix instead of its dense inverse: :class:`~nsga_jax.integrators.linalg.Tridiagonal`).
     """
 
     M: Matrix | None
@@ -167,7 +167,7 @@ def constant_operators(
         if top_left is None or M is None or K is None or (needs_G and G is None):
             return None, None
         A = top_left(M, K, C)
-        inv = Tridiagonal(band_matrix(A, 1)) if tridiagonal else jnp.linalg.inv(A)
+        inv = Tridiagonal.of(band_matrix(A, 1)) if tridiagonal else jnp.linalg.inv(A)
         inv_Gt = inverse_solve(inv)(G[rows].T) if (G is not None and len(range(*rows.indices(nc)))) else None
         return inv, inv_Gt
 
