@@ -3,6 +3,16 @@
 An element is a pure function of its own coordinates, velocities and
 parameters. Its tangents come from ``jax.jacfwd`` at element level; global
 vectors and matrices are assembled by scatter-add over the element-to-dof map.
+
+A 1D chain, whose element e holds the s coordinates of nodes e and e + 1
+(the bar, s = 1; the planar beam, s = 3), is recognised from its static
+element-to-dof map (:func:`chain_layout`), and its matrices (the tangents a
+nonlinear beam assembles at every Newton iteration) are laid out with pads
+and reshapes instead of a scatter-add: the same sums (a diagonal block
+receives exactly two contributions, and two-term sums do not depend on their
+order), in operations the compiler fuses. On the flexible pendulum this took
+a step from about 70 to about 40 µs with the same compile work. (Vectors
+keep the gather and the scatter: slicing them measured no faster.)
 """
 
 from __future__ import annotations
@@ -121,6 +131,20 @@ def _vmapped_jacobian(fn: ElementForce, argnums: int):
     return jax.jit(jax.vmap(jax.jacfwd(fn, argnums=argnums)))
 
 
+@functools.lru_cache(maxsize=256)
+def chain_layout(dofs: StaticIndex) -> tuple[int, int] | None:
+    """``(offset, s)`` when element e's dofs are ``offset + s e + [0, ..., 2s - 1]``
+    (a chain of 2-node elements with s dofs per node), else ``None``."""
+    idx = dofs.array
+    if idx.ndim != 2 or idx.shape[0] < 1 or idx.shape[1] % 2:
+        return None
+    n_el, k = idx.shape
+    s = k // 2
+    offset = int(idx[0, 0])
+    expected = offset + s * np.arange(n_el)[:, None] + np.arange(k)[None, :]
+    return (offset, s) if np.array_equal(idx, expected) else None
+
+
 def scatter_vector(dofs: StaticIndex, values: jax.Array, n: int) -> Vector:
     """Sum element vectors (n_el, k) into a global vector (n,)."""
     return jnp.zeros((n,), values.dtype).at[dofs.array].add(values)
@@ -128,5 +152,25 @@ def scatter_vector(dofs: StaticIndex, values: jax.Array, n: int) -> Vector:
 
 def scatter_matrix(dofs: StaticIndex, values: jax.Array, n: int) -> Matrix:
     """Sum element matrices (n_el, k, k) into a dense global matrix (n, n)."""
-    idx = dofs.array
-    return jnp.zeros((n, n), values.dtype).at[idx[:, :, None], idx[:, None, :]].add(values)
+    chain = chain_layout(dofs)
+    if chain is None:
+        idx = dofs.array
+        return jnp.zeros((n, n), values.dtype).at[idx[:, :, None], idx[:, None, :]].add(values)
+    # a chain's matrix is block-tridiagonal: row block i holds the node blocks
+    # (i, i - 1), (i, i) and (i, i + 1), each a single element block except
+    # the diagonal ones, sums of two
+    offset, s = chain
+    n_nodes = values.shape[0] + 1
+    blocks = [(0, 1), (1, 0)]  # node-block padding: element e's first / second node
+    diagonal = (jnp.pad(values[:, :s, :s], [blocks[0], (0, 0), (0, 0)])
+                + jnp.pad(values[:, s:, s:], [blocks[1], (0, 0), (0, 0)]))
+    upper = jnp.pad(values[:, :s, s:], [blocks[0], (0, 0), (0, 0)])  # block (e, e + 1), in row block e
+    lower = jnp.pad(values[:, s:, :s], [blocks[1], (0, 0), (0, 0)])  # block (e + 1, e), in row block e + 1
+    rows = jnp.concatenate([lower, diagonal, upper], axis=2)  # (N, s, 3s): columns of nodes i - 1, i, i + 1
+    # skew: padded to (N + 3) s columns and read back (N + 2) s wide, row block i starts at column i s
+    width = (n_nodes + 2) * s
+    rows = jnp.pad(jnp.swapaxes(rows, 0, 1), [(0, 0), (0, 0), (0, n_nodes * s)]).reshape(s, -1)
+    skewed = rows[:, : n_nodes * width].reshape(s, n_nodes, width)[:, :, s:(n_nodes + 1) * s]
+    dense = jnp.swapaxes(skewed, 0, 1).reshape(n_nodes * s, n_nodes * s)
+    tail = n - offset - n_nodes * s
+    return jnp.pad(dense, [(offset, tail), (offset, tail)])

@@ -51,3 +51,36 @@ def test_fast_path_equals_generic_path():
     np.testing.assert_allclose(fast.q, generic.q, atol=1e-9)
     np.testing.assert_allclose(fast.v, generic.v, atol=1e-7)
     np.testing.assert_allclose(fast.impulse, generic.impulse, atol=1e-7)
+
+
+def _scene_groups():
+    from nsga_jax.scenes import load_scene
+
+    return {name: load_scene(name).model.elements
+            for name in ("impacting_bar", "flexible_pendulum", "flexible_cube")}
+
+
+def test_chains_are_recognised_from_their_dof_maps():
+    from nsga_jax.assembly import StaticIndex, chain_layout
+
+    groups = _scene_groups()
+    assert chain_layout(groups["impacting_bar"].dofs) == (0, 1)
+    assert chain_layout(groups["flexible_pendulum"].dofs) == (0, 3)
+    assert chain_layout(groups["flexible_cube"].dofs) is None
+    assert chain_layout(StaticIndex([[0, 1], [2, 3]])) is None  # disjoint elements
+    assert chain_layout(StaticIndex([[4, 5, 6, 7], [6, 7, 8, 9]])) == (4, 2)
+
+
+@pytest.mark.parametrize("offset, s, n_el, tail", [(0, 1, 7, 0), (0, 3, 4, 0), (2, 2, 3, 3), (0, 2, 1, 0)])
+def test_chain_matrix_assembly_equals_the_scatter_add(offset, s, n_el, tail):
+    """A chain's block-tridiagonal layout gives exactly the scatter-add's matrix."""
+    from nsga_jax.assembly import StaticIndex, chain_layout, scatter_matrix
+
+    dofs = offset + s * np.arange(n_el)[:, None] + np.arange(2 * s)[None, :]
+    n = int(dofs.max()) + 1 + tail
+    index = StaticIndex(dofs)
+    assert chain_layout(index) == (offset, s)
+    me = np.random.default_rng(s).normal(size=(n_el, 2 * s, 2 * s))
+    expected = np.zeros((n, n))
+    np.add.at(expected, (dofs[:, :, None], dofs[:, None, :]), me)
+    np.testing.assert_array_equal(jax.jit(scatter_matrix, static_argnums=(0, 2))(index, jnp.asarray(me), n), expected)
