@@ -11,9 +11,9 @@ nonlinear beam assembles at every Newton iteration) are laid out with pads
 and reshapes instead of a scatter-add: the same sums (a diagonal block
 receives exactly two contributions, and two-term sums do not depend on their
 order), in operations the compiler fuses. On the flexible pendulum a step
-took 37-61 µs against 63-93 with the scatter-add (interleaved runs on a
-2-core CPU), for the same compile work. (Vectors keep the gather and the
-scatter: slicing them measured no faster.)
+took 33-37 µs against 46-62 with the scatter-add, for the same compile work
+(``experiments/compare_revisions.py``, 2-core CPU). (Vectors keep the gather
+and the scatter: slicing them measured no faster.)
 """
 
 from __future__ import annotations
@@ -162,11 +162,11 @@ def scatter_matrix(dofs: StaticIndex, values: jax.Array, n: int) -> Matrix:
     # the diagonal ones, sums of two
     offset, s = chain
     n_nodes = values.shape[0] + 1
-    blocks = [(0, 1), (1, 0)]  # node-block padding: element e's first / second node
-    diagonal = (jnp.pad(values[:, :s, :s], [blocks[0], (0, 0), (0, 0)])
-                + jnp.pad(values[:, s:, s:], [blocks[1], (0, 0), (0, 0)]))
-    upper = jnp.pad(values[:, :s, s:], [blocks[0], (0, 0), (0, 0)])  # block (e, e + 1), in row block e
-    lower = jnp.pad(values[:, s:, :s], [blocks[1], (0, 0), (0, 0)])  # block (e + 1, e), in row block e + 1
+    first, second = (0, 1), (1, 0)  # padding over nodes: an element block lands on its first / second node
+    diagonal = (jnp.pad(values[:, :s, :s], [first, (0, 0), (0, 0)])
+                + jnp.pad(values[:, s:, s:], [second, (0, 0), (0, 0)]))
+    upper = jnp.pad(values[:, :s, s:], [first, (0, 0), (0, 0)])  # block (e, e + 1), in row block e
+    lower = jnp.pad(values[:, s:, :s], [second, (0, 0), (0, 0)])  # block (e + 1, e), in row block e + 1
     rows = jnp.concatenate([lower, diagonal, upper], axis=2)  # (N, s, 3s): columns of nodes i - 1, i, i + 1
     # skew: padded to (N + 3) s columns and read back (N + 2) s wide, row block i starts at column i s
     width = (n_nodes + 2) * s

@@ -96,14 +96,18 @@ class Tridiagonal(eqx.Module):
         """A^{-1} rhs for rhs of shape (n,) or (n, m)."""
         p, s = self.blocks_inv.shape[0], self.blocks_inv.shape[-1]
         rest = rhs.shape[1:]
+
+        def per_row(c):  # a vector over blocks or separators, broadcast against the right-hand sides
+            return c.reshape(-1, *([1] * len(rest)))
+
         padded = jnp.pad(rhs, [(0, p * (s + 1) - self.n)] + [(0, 0)] * len(rest)).reshape(p, s + 1, *rest)
         y = jnp.einsum("kij,kj...->ki...", self.blocks_inv, padded[:, :s])
-        to_left, to_right = (c.reshape(-1, *([1] * len(rest))) for c in self.to_separator)
-        x_sep = self.schur_inv @ (padded[:-1, s] - to_left * y[:-1, s - 1] - to_right * y[1:, 0])
-        last_row, first_row = (c.reshape(-1, *([1] * len(rest))) for c in self.from_separator)
+        to_left, to_right = self.to_separator
+        x_sep = self.schur_inv @ (padded[:-1, s] - per_row(to_left) * y[:-1, s - 1] - per_row(to_right) * y[1:, 0])
+        last_row, first_row = self.from_separator
         zero = jnp.zeros((1, *rest), rhs.dtype)
-        into_last = jnp.concatenate([last_row * x_sep, zero])  # A_IS x_S on each block's last row
-        into_first = jnp.concatenate([zero, first_row * x_sep])  # ... and on its first row
+        into_last = jnp.concatenate([per_row(last_row) * x_sep, zero])  # A_IS x_S on each block's last row
+        into_first = jnp.concatenate([zero, per_row(first_row) * x_sep])  # ... and on its first row
         cols = (slice(None), slice(None)) + (None,) * len(rest)
         x = (y - self.blocks_inv[:, :, s - 1][cols] * into_last[:, None]
              - self.blocks_inv[:, :, 0][cols] * into_first[:, None])
