@@ -1,0 +1,91 @@
+"""A scene's per-step time and compile work at two git revisions, interleaved.
+
+    python experiments/compare_revisions.py BASE [HEAD] --scene flexible_pendulum [--pairs 4] [--batch 64]
+
+Each revision is checked out into a temporary worktree and run in its own
+process, alternately (BASE, HEAD, BASE, HEAD, ...), so that the slow and fast
+spells of a shared machine hit both; HEAD defaults to the working tree. Each
+process reports the scene's ``nsga-jax bench`` case run 4 times (fastest
+µs/step of whole runs, compile apart) and, with ``--batch B``, the process
+CPU time of compiling a batch of B members (XLA's code generation runs on
+several threads, so CPU time is steadier than wall time). Prints one line per
+process and the minimum of each column per revision.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+MEASURE = r"""
+import json, os, sys, time
+sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f)]  # import the given tree
+sys.path.insert(0, sys.argv[1])
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
+from nsga_jax.bench import _bench_scene
+scene = _bench_scene(sys.argv[2], {"scheme": "ds"}, 2000)
+runs = [scene.run(dtype="float64", throw=False) for _ in range(4)]
+row = {"us_per_step": min(1e6 * r.wall_time / r.n_steps for r in runs), "compile_s": runs[0].compile_time}
+batch = int(sys.argv[3])
+if batch > 1:
+    from nsga_jax.batch import BatchRun, broadcast_members
+    from nsga_jax._simulate import _n_steps
+    n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
+    cpu = time.process_time()
+    run = BatchRun(broadcast_members(scene.model, batch), scene.scheme(), 0.0, np.tile(scene.q0, (batch, 1)),
+                   np.tile(scene.v0, (batch, 1)), np.full(batch, scene.solver["h"]), np.full(batch, n))
+    row.update(batch_compile_s=run.compile_time, batch_compile_cpu_s=time.process_time() - cpu)
+print(json.dumps(row))
+"""
+
+
+def measure(tree: Path, scene: str, batch: int) -> dict:
+    out = subprocess.run([sys.executable, "-c", MEASURE, str(tree), scene, str(batch)], check=True,
+                         capture_output=True, text=True, env={**os.environ, "NSGA_JAX_CACHE": "off"})
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("base", help="git revision to compare against")
+    parser.add_argument("head", nargs="?", default=None, help="git revision (default: the working tree)")
+    parser.add_argument("--scene", required=True)
+    parser.add_argument("--pairs", type=int, default=4)
+    parser.add_argument("--batch", type=int, default=1, help="also compile a batch of this many members")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="nsga_jax_revisions_") as tmp:
+        trees = {}
+        for label, rev in (("base", args.base), ("head", args.head)):
+            if rev is None:
+                trees[label] = ROOT
+                continue
+            trees[label] = Path(tmp) / label
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(trees[label]), rev],
+                           check=True)
+        try:
+            rows = {"base": [], "head": []}
+            for _ in range(args.pairs):
+                for label in ("base", "head"):
+                    row = measure(trees[label], args.scene, args.batch)
+                    rows[label].append(row)
+                    print(label, " ".join(f"{k} {v:.2f}" for k, v in row.items()), flush=True)
+            for label, rs in rows.items():
+                print(f"{label} ({args.base if label == 'base' else args.head or 'working tree'}): min",
+                      " ".join(f"{k} {min(r[k] for r in rs):.2f}" for k in rs[0]),
+                      "| max", " ".join(f"{k} {max(r[k] for r in rs):.2f}" for k in rs[0]))
+        finally:
+            for label, tree in trees.items():
+                if tree != ROOT:
+                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+
+
+if __name__ == "__main__":
+    main()
