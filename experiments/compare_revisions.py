@@ -34,6 +34,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# The child imports the private helpers bench._bench_scene and _simulate._n_steps on purpose:
+# they exist under these names in every revision this script compares.
 MEASURE = r"""
 import json, os, sys, time
 sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f)]  # import the given tree
