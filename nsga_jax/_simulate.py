@@ -32,7 +32,9 @@ from jax import lax
 
 from .integrators.base import (
     AbstractScheme,
+    Operators,
     StepOutput,
+    StepState,
     output_template,
     pack_output,
     packed_sizes,
@@ -517,12 +519,45 @@ def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress,
         result=result,
         residual=float(out.residual[i, j]),
         tolerance=float(out.tolerance[i, j]),
-        hint=FLOAT32_HINT if dtype == "float32" and result in CAPPED else "",
+        hint=(FLOAT32_HINT if dtype == "float32" and result in CAPPED
+              else nonfinite_origin(ops, state) if result in NONFINITE else ""),
     )
     return sol, err
 
 
 CAPPED = (Result.smooth_max_iter, Result.position_max_iter, Result.velocity_max_iter, Result.coupled_max_iter)
+NONFINITE = (Result.smooth_nonfinite, Result.position_nonfinite, Result.velocity_nonfinite)
+
+OPERATOR_NAMES = {
+    "M": "the mass matrix", "K": "the stiffness matrix", "C": "the damping matrix",
+    "G": "the constraint Jacobian",
+    "smooth_inv": "the inverted iteration matrix of the smooth motion sub-problem",
+    "position_inv": "the inverted iteration matrix of the position correction",
+    "velocity_inv": "the inverted iteration matrix of the velocity jump",
+}
+
+
+def nonfinite_origin(ops: Operators, initial: StepState) -> str:
+    """Why a run met a non-finite value, when it was there before the first
+    step: a constant operator computed once for the step size (an inverted
+    iteration matrix is not finite when the matrix is singular), or the
+    initial acceleration (M(q0) singular, or f(q0, v0, t0) not finite).
+    Checked on the host only after a failure, so it costs a run nothing.
+    Returns ``""`` when both are finite."""
+
+    def finite(tree) -> bool:
+        return all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(tree))
+
+    bad = [OPERATOR_NAMES[f.name] for f in dataclasses.fields(ops)
+           if f.name in OPERATOR_NAMES and getattr(ops, f.name) is not None and not finite(getattr(ops, f.name))]
+    causes = []
+    if bad:
+        listed = bad[0] if len(bad) == 1 else ", ".join(bad[:-1]) + " and " + bad[-1]
+        causes.append(f"{listed} (computed once for this h) {'is' if len(bad) == 1 else 'are'} not finite: "
+                      "a singular matrix (a coordinate with neither mass nor stiffness?)")
+    if not finite(initial.vd):
+        causes.append("the initial acceleration is not finite (M(q0) singular, or f(q0, v0, t0) not finite)")
+    return ("Before the first step, " + "; ".join(causes) + ".") if causes else ""
 FLOAT32_HINT = (
     "The run is in float32 (eps = 1.2e-7): if the residual is within a few hundred eps of the size of "
     "its terms, the limit is the precision; rerun in float64."

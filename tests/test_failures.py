@@ -1,5 +1,6 @@
 """Failures are named (step, time, sub-problem, residual), never silent NaNs."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -49,3 +50,56 @@ def test_nan_is_reported_at_the_step_it_appears():
     sol = nj.simulate(model, nj.DS(), 0.0, 1.0, 0.01, [1.0], [0.0], throw=False)
     assert sol.failed_steps[0] == 6 and sol.stats["failed_steps"] == 95
     assert np.all(np.isfinite(sol.q[:6]))
+
+
+class HalfMassless(nj.Model):
+    """Two coordinates, the second with neither mass nor stiffness: M is singular."""
+
+    m: jax.Array
+    n_dof = 2
+    constant_mass = True
+    linear_force = True
+    linear_constraints = True
+    mbar = 1.0
+
+    def mass(self, q):
+        return jnp.diag(jnp.stack([self.m, 0.0 * self.m]))
+
+    def force(self, q, v, t):
+        return jnp.stack([-9.81 * self.m, 0.0 * self.m])
+
+
+@pytest.mark.parametrize("fast_paths", [True, False])
+def test_a_singular_matrix_is_named_as_the_cause(fast_paths):
+    with pytest.raises(nj.ConvergenceError, match="non-finite value") as info:
+        nj.simulate(HalfMassless(m=jnp.asarray(1.0)), nj.DS(fast_paths=fast_paths), 0.0, 0.01, 1e-3,
+                    [1.0, 0.0], [0.0, 0.0])
+    err = info.value
+    assert err.step == 1 and err.result == nj.Result.smooth_nonfinite
+    message = str(err)
+    assert "Before the first step" in message and "initial acceleration is not finite" in message
+    # the fast path inverted the smooth iteration matrix once, the generic one never
+    assert ("inverted iteration matrix of the smooth motion sub-problem" in message) == fast_paths
+
+
+def test_a_failure_after_a_finite_start_gets_no_singular_matrix_hint():
+    with pytest.raises(nj.ConvergenceError) as info:
+        nj.simulate(Blowup(m=1.0, k=1.0), nj.DS(), 0.0, 1.0, 0.01, [1.0], [0.0])
+    assert "Before the first step" not in str(info.value)
+
+
+def test_a_singular_block_of_the_tridiagonal_elimination_is_named():
+    from nsga_jax._simulate import nonfinite_origin
+    from nsga_jax.integrators.base import Operators, StepState
+    from nsga_jax.integrators.linalg import Tridiagonal
+
+    n = 11
+    band = jnp.stack([jnp.full(n, -1.0), jnp.full(n, 2.0), jnp.full(n, -1.0)])
+    singular = Tridiagonal.of(band.at[:, :4].set(0.0))  # the first block is all zero
+    assert not np.all(np.isfinite(np.asarray(singular.blocks_inv)))
+    nothing = dict.fromkeys(f for f in Operators.__dataclass_fields__)
+    state = StepState(t=jnp.zeros(()), q=jnp.zeros(n), v=jnp.zeros(n), vd=jnp.zeros(n), a=jnp.zeros(n))
+    assert nonfinite_origin(Operators(**nothing), state) == ""
+    hint = nonfinite_origin(Operators(**{**nothing, "position_inv": singular}), state)
+    assert "inverted iteration matrix of the position correction" in hint and "singular" in hint
+    assert "initial acceleration" not in hint
