@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 
 import equinox as eqx
@@ -52,6 +53,25 @@ from .results import ConfigError, Result
 
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
+
+CPU_SHARDING_WARNING = (
+    "this batch is split over {n} CPU devices and its model factors matrices at every Newton "
+    "iteration (a nonlinear force or nonlinear constraints): on jaxlib 0.10's CPU backend, batched "
+    "LU factorisations running on several host devices at once can deadlock (the flexible "
+    "pendulum's batch of 64 hangs on 2 forced devices). If the run makes no progress, use one "
+    "CPU device (unset --xla_force_host_platform_device_count)."
+)
+
+
+def cpu_sharding_may_deadlock(model: Model, platform: str, n_devices: int) -> bool:
+    """Whether a batch of ``model`` split over ``n_devices`` devices of ``platform``
+    risks jaxlib 0.10's CPU thread-pool deadlock: several CPU devices, and a
+    model whose Newton iterations factor batched matrices (anything but a
+    linear force with affine constraints, whose iteration matrices the fast
+    paths invert once)."""
+    affine = model.linear_constraints or model.n_constraints == 0
+    return platform == "cpu" and n_devices > 1 and not (model.linear_force and affine)
+
 
 RECORD_BUDGET = 2**22
 """Recorded numbers per batched chunk (32 MiB in float64): the chunk length of
@@ -201,6 +221,8 @@ class BatchRun:
         B = len(hs)
         if mesh is not None and B % mesh.size:
             raise ConfigError(f"the batch ({B} members) must be a multiple of the mesh's {mesh.size} devices")
+        if mesh is not None and cpu_sharding_may_deadlock(model, mesh.devices.flat[0].platform, mesh.size):
+            warnings.warn(CPU_SHARDING_WARNING.format(n=mesh.size), RuntimeWarning, stacklevel=2)
         self.n_members = B
         self.longest = int(np.max(n_steps))
         self.length = length or batch_chunk_length(model, B)

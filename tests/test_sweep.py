@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.batch import broadcast_members
+from nsga_jax.batch import broadcast_members, cpu_sharding_may_deadlock
 from nsga_jax.cli import main
 from nsga_jax.metrics import relative_l1_error
 from nsga_jax.results import ConfigError
@@ -130,11 +130,16 @@ def test_killed_sweep_resumes_to_the_same_table(tmp_path):
 
 
 SHARDED_SWEEP = """
+import warnings
 import jax
 from nsga_jax.sweep import sweep
 assert len(jax.devices()) == 2, jax.devices()
-sweep("impacting_bar", {{"e": [0.0, 0.5, 1.0]}}, hs=[1e-3, 2e-3], overrides={{"t_end": 0.4}}, out={out!r},
-      batch_size=4)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    sweep("impacting_bar", {{"e": [0.0, 0.5, 1.0]}}, hs=[1e-3, 2e-3], overrides={{"t_end": 0.4}}, out={out!r},
+          batch_size=4)
+# the linear bar factors nothing per iteration: no deadlock warning
+assert not [w for w in caught if "deadlock" in str(w.message)], [str(w.message) for w in caught]
 """
 
 
@@ -191,3 +196,13 @@ def test_bad_sweep_settings():
 def test_cli_sweep_refuses_a_bad_step_size(tmp_path, capsys):
     assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--h", "abc", "--out", str(tmp_path / "s")]) == 2
     assert "--h expects comma-separated numbers" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name, risky", [("bouncing_ball", False), ("impacting_bar", False),
+                                         ("rigid_pendulum", True), ("rigid_box", True),
+                                         ("flexible_pendulum", True), ("flexible_cube", True)])
+def test_cpu_sharding_deadlock_risk_follows_the_model_structure(name, risky):
+    model = load_scene(name).model
+    assert cpu_sharding_may_deadlock(model, "cpu", 2) is risky
+    assert not cpu_sharding_may_deadlock(model, "cpu", 1)
+    assert not cpu_sharding_may_deadlock(model, "gpu", 2)
