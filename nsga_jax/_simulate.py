@@ -526,6 +526,10 @@ def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress,
 
 
 CAPPED = (Result.smooth_max_iter, Result.position_max_iter, Result.velocity_max_iter, Result.coupled_max_iter)
+FLOAT32_HINT = (
+    "The run is in float32 (eps = 1.2e-7): if the residual is within a few hundred eps of the size of "
+    "its terms, the limit is the precision; rerun in float64."
+)
 NONFINITE = (Result.smooth_nonfinite, Result.position_nonfinite, Result.velocity_nonfinite)
 
 OPERATOR_NAMES = {
@@ -558,10 +562,6 @@ def nonfinite_origin(ops: Operators, initial: StepState) -> str:
     if not finite(initial.vd):
         causes.append("the initial acceleration is not finite (M(q0) singular, or f(q0, v0, t0) not finite)")
     return ("Before the first step, " + "; ".join(causes) + ".") if causes else ""
-FLOAT32_HINT = (
-    "The run is in float32 (eps = 1.2e-7): if the residual is within a few hundred eps of the size of "
-    "its terms, the limit is the precision; rerun in float64."
-)
 
 
 def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> StepOutput:
