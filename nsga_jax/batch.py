@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import functools
 import time
-import warnings
 from collections.abc import Iterator, Sequence
 
 import equinox as eqx
@@ -48,29 +47,19 @@ from ._simulate import (
     validate_scheme,
 )
 from .integrators.base import AbstractScheme, StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
+from .integrators.linalg import bounded_lapack_batches
 from .models.base import Model
 from .results import ConfigError, Result
 
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
 
-CPU_SHARDING_WARNING = (
-    "this batch is split over {n} CPU devices and its model factors matrices at every Newton "
-    "iteration (a nonlinear force or nonlinear constraints): on jaxlib 0.10's CPU backend, batched "
-    "LU factorisations running on several host devices at once can deadlock (the flexible "
-    "pendulum's batch of 64 hangs on 2 forced devices). If the run makes no progress, use one "
-    "CPU device (unset --xla_force_host_platform_device_count)."
-)
-
-
-def cpu_sharding_may_deadlock(model: Model, platform: str, n_devices: int) -> bool:
-    """Whether a batch of ``model`` split over ``n_devices`` devices of ``platform``
-    risks jaxlib 0.10's CPU thread-pool deadlock: several CPU devices, and a
-    model whose Newton iterations factor batched matrices (anything but a
-    linear force with affine constraints, whose iteration matrices the fast
-    paths invert once)."""
-    affine = model.linear_constraints or model.n_constraints == 0
-    return platform == "cpu" and n_devices > 1 and not (model.linear_force and affine)
+def bounds_lapack_batches(mesh: Mesh | None) -> bool:
+    """Whether a batch split over ``mesh`` is traced with
+    :func:`~nsga_jax.integrators.linalg.bounded_lapack_batches`: when its
+    members run on several CPU devices at once, where jaxlib 0.10's large
+    batched LAPACK calls can deadlock XLA's shared thread pool."""
+    return mesh is not None and mesh.size > 1 and mesh.devices.flat[0].platform == "cpu"
 
 
 RECORD_BUDGET = 2**22
@@ -163,6 +152,10 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
 
 @functools.cache
 def _compiled_steps(length: int, mesh: Mesh | None):
+    """The jitted preparation and chunk programs of a batch over ``mesh``
+    (traced under :func:`bounded_lapack_batches` where
+    :func:`bounds_lapack_batches` says so: one pair per mesh keeps the two
+    tracings apart)."""
     prepare = eqx.filter_jit(_on_devices(_prepare_members, mesh))
     run = functools.partial(_run_members, length=length)
     return prepare, eqx.filter_jit(_on_devices(run, mesh))
@@ -170,9 +163,8 @@ def _compiled_steps(length: int, mesh: Mesh | None):
 
 def _prepare_members(*members):
     """Constant operators and initial carry of each member, one member after
-    the other (``lax.map``): it runs once per batch, and batched LU
-    factorisations running side by side can deadlock XLA's CPU thread pool
-    (jaxlib 0.10, several host devices)."""
+    the other (``lax.map``): it runs once per batch, and its LAPACK calls
+    then stay those of one member (see :func:`bounds_lapack_batches`)."""
 
     def one(args):
         ops, state = _prepare_and_init_raw(*args)
@@ -221,16 +213,16 @@ class BatchRun:
         B = len(hs)
         if mesh is not None and B % mesh.size:
             raise ConfigError(f"the batch ({B} members) must be a multiple of the mesh's {mesh.size} devices")
-        if mesh is not None and cpu_sharding_may_deadlock(model, mesh.devices.flat[0].platform, mesh.size):
-            warnings.warn(CPU_SHARDING_WARNING.format(n=mesh.size), RuntimeWarning, stacklevel=2)
         self.n_members = B
         self.longest = int(np.max(n_steps))
         self.length = length or batch_chunk_length(model, B)
         prepare, self._run = _compiled_steps(self.length, mesh)
         schemes = broadcast_members(scheme, B)
         args = _place((model, schemes, np.full(B, t0), np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
+        bounded = bounds_lapack_batches(mesh)
         tc = time.perf_counter()
-        prepare = prepare.lower(*args).compile()
+        with bounded_lapack_batches(bounded):
+            prepare = prepare.lower(*args).compile()
         self.compile_time = time.perf_counter() - tc
         tw = time.perf_counter()
         self._ops, self._carry = prepare(*args)
@@ -240,7 +232,8 @@ class BatchRun:
         self._template = output_template(model, self._carry[0].q.dtype)
         self._consts = _place((np.asarray(hs), np.asarray(n_steps, dtype=np.int32)), mesh)
         tc = time.perf_counter()
-        self._run = self._run.lower(*self._args, self._ops, self._carry, *self._consts).compile()
+        with bounded_lapack_batches(bounded):
+            self._run = self._run.lower(*self._args, self._ops, self._carry, *self._consts).compile()
         self.compile_time += time.perf_counter() - tc
 
     @property

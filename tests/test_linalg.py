@@ -97,3 +97,67 @@ def test_the_bar_solves_its_constant_matrices_by_tridiagonal_elimination():
     A = np.asarray(ops.M) + 1e-6 * np.asarray(ops.K)  # DS's position matrix M + h² K
     np.testing.assert_allclose(ops.position_inv_Gt, np.linalg.solve(A, G.T), rtol=1e-10,
                                atol=1e-12 * np.abs(np.linalg.solve(A, G.T)).max())
+
+
+def lu_operand_shapes(jaxpr) -> list[tuple[int, ...]]:
+    """Shapes of the matrices handed to LU factorisations anywhere in ``jaxpr``
+    (sub-jaxprs of loops, conditionals and custom rules included)."""
+    shapes = []
+    for eqn in jaxpr.eqns:
+        if eqn.primitive.name == "lu":
+            shapes.append(eqn.invars[0].aval.shape)
+        for value in eqn.params.values():
+            for sub in value if isinstance(value, (tuple, list)) else (value,):
+                inner = getattr(sub, "jaxpr", sub)
+                if hasattr(inner, "eqns"):
+                    shapes += lu_operand_shapes(inner)
+    return shapes
+
+
+@pytest.mark.parametrize("n, chunked", [(27, True), (4, False)])
+def test_bounded_lapack_batches_chunk_a_vmapped_batch_with_the_same_results(n, chunked):
+    """Traced under bounded_lapack_batches, a vmap over the factorisations and
+    solves hands each LU call at most LAPACK_WORK_PER_CALL of work (larger
+    batched calls deadlock jaxlib 0.10 on several CPU devices): 27 × 27
+    matrices one per call, small ones still in one batched call; the results
+    are the batched ones."""
+    from nsga_jax.integrators.linalg import (
+        LAPACK_WORK_PER_CALL,
+        Tridiagonal,
+        band_matrix,
+        bounded_lapack_batches,
+        masked_solve,
+    )
+
+    def work(shape):
+        return np.prod(shape[:-2], dtype=int) * shape[-1] ** 3
+
+    rng = np.random.default_rng(3)
+    B, m = 6, 3
+    A = rng.normal(size=(B, n, n)) + n * np.eye(n)
+    rhs = rng.normal(size=(B, n))
+    D = rng.normal(size=(B, m, m)) + m * np.eye(m)
+    active = np.array([True, False, True])
+    tri = np.where(np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > 1, 0.0, A)
+
+    def solves(A, rhs, D, tri):
+        return (Factorisation.of(A, 0.0, 0.0).solve(rhs), dense_solve(A)(rhs), masked_solve(D, rhs[:m], active),
+                Tridiagonal.of(band_matrix(tri, 1)).solve(rhs))
+
+    args = tuple(jnp.asarray(x) for x in (A, rhs, D, tri))
+    # (a new function object per trace: JAX reuses a function's earlier trace)
+    whole = lu_operand_shapes(jax.make_jaxpr(jax.vmap(solves))(*args).jaxpr)
+    with bounded_lapack_batches():
+        bounded_jaxpr = jax.make_jaxpr(jax.vmap(solves))(*args)
+        bounded = jax.jit(jax.vmap(solves))(*args)
+    shapes = lu_operand_shapes(bounded_jaxpr.jaxpr)
+    assert len(shapes) == len(whole)
+    assert all(work(s) <= LAPACK_WORK_PER_CALL for s in shapes), shapes
+    assert bool(max(map(work, whole)) > LAPACK_WORK_PER_CALL) is chunked
+    if chunked:
+        assert (B, n, n) in whole and (1, n, n) in shapes  # one matrix per call
+    else:
+        assert shapes == whole
+    for x, y in zip(bounded, jax.jit(jax.vmap(solves))(*args)):
+        np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(bounded[0], np.linalg.solve(A, rhs[..., None])[..., 0], rtol=1e-12)
