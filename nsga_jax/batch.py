@@ -54,7 +54,8 @@ from .results import ConfigError, Result
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
 
-def bounds_lapack_batches(mesh: Mesh | None) -> bool:
+
+def needs_bounded_lapack_batches(mesh: Mesh | None) -> bool:
     """Whether a batch split over ``mesh`` is traced with
     :func:`~nsga_jax.integrators.linalg.bounded_lapack_batches`: when its
     members run on several CPU devices at once, where jaxlib 0.10's large
@@ -154,7 +155,7 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
 def _compiled_steps(length: int, mesh: Mesh | None):
     """The jitted preparation and chunk programs of a batch over ``mesh``
     (traced under :func:`bounded_lapack_batches` where
-    :func:`bounds_lapack_batches` says so: one pair per mesh keeps the two
+    :func:`needs_bounded_lapack_batches` says so: one pair per mesh keeps the two
     tracings apart)."""
     prepare = eqx.filter_jit(_on_devices(_prepare_members, mesh))
     run = functools.partial(_run_members, length=length)
@@ -164,7 +165,7 @@ def _compiled_steps(length: int, mesh: Mesh | None):
 def _prepare_members(*members):
     """Constant operators and initial carry of each member, one member after
     the other (``lax.map``): it runs once per batch, and its LAPACK calls
-    then stay those of one member (see :func:`bounds_lapack_batches`)."""
+    then stay those of one member (see :func:`needs_bounded_lapack_batches`)."""
 
     def one(args):
         ops, state = _prepare_and_init_raw(*args)
@@ -219,7 +220,7 @@ class BatchRun:
         prepare, self._run = _compiled_steps(self.length, mesh)
         schemes = broadcast_members(scheme, B)
         args = _place((model, schemes, np.full(B, t0), np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
-        bounded = bounds_lapack_batches(mesh)
+        bounded = needs_bounded_lapack_batches(mesh)
         tc = time.perf_counter()
         with bounded_lapack_batches(bounded):
             prepare = prepare.lower(*args).compile()

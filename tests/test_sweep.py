@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.batch import broadcast_members, bounds_lapack_batches, member_mesh
+from nsga_jax.batch import broadcast_members, member_mesh, needs_bounded_lapack_batches
 from nsga_jax.cli import main
 from nsga_jax.metrics import relative_l1_error
 from nsga_jax.results import ConfigError
@@ -131,10 +131,10 @@ def test_killed_sweep_resumes_to_the_same_table(tmp_path):
 
 SHARDED_SWEEP = """
 import jax
-from nsga_jax.batch import bounds_lapack_batches, member_mesh
+from nsga_jax.batch import needs_bounded_lapack_batches, member_mesh
 from nsga_jax.sweep import sweep
 assert len(jax.devices()) == 2, jax.devices()
-assert bounds_lapack_batches(member_mesh())
+assert needs_bounded_lapack_batches(member_mesh())
 sweep({name!r}, {grid!r}, hs={hs!r}, overrides={overrides!r}, out={out!r}, batch_size=4)
 """
 
@@ -170,8 +170,8 @@ def test_sharded_sweep_equals_unsharded(tmp_path, name):
 def test_only_a_batch_over_several_cpu_devices_bounds_its_lapack_calls():
     import jax
 
-    assert not bounds_lapack_batches(None)
-    assert not bounds_lapack_batches(member_mesh(jax.devices()[:1]))
+    assert not needs_bounded_lapack_batches(None)
+    assert not needs_bounded_lapack_batches(member_mesh(jax.devices()[:1]))
 
 
 def test_cli_sweep(tmp_path, capsys):
