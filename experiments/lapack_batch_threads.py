@@ -1,10 +1,10 @@
 """Which batched LU factorisations jaxlib's CPU kernel spreads over threads.
 
-    python experiments/lapack_batch_threads.py [--sizes 2,4,8,12,16,27] [--batches 8,32,128]
+    python experiments/lapack_batch_threads.py [--sizes 2,8,12,16,27] [--batches 8,16,32,64,128]
 
 For each matrix size n and batch B, a compiled loop factors B matrices of
 n × n (``jax.scipy.linalg.lu_factor``) 3e8 / (B n³) times (200 to 20,000) on one CPU
-device, and prints the CPU seconds its threads spent (from
+device, and prints the wall time per matrix and the CPU seconds its threads spent (from
 ``/proc/self/task``): all on the calling thread when each call runs there,
 on XLA's intra-op pool threads (``tf_XLAEigen``) when the kernel split the
 batch over them. A split call blocks its thread until the parts are done,
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import time
 
 import jax
 import jax.numpy as jnp
@@ -46,16 +47,16 @@ def thread_cpu_seconds() -> dict[tuple[str, str], float]:
     return seconds
 
 
-def cpu_by_pool(n: int, batch: int) -> tuple[float, float]:
-    """(CPU seconds on the intra-op pool's threads, on every other thread) of a
-    loop of batched LU factorisations."""
+def cpu_by_pool(n: int, batch: int) -> tuple[float, float, float]:
+    """(µs of wall time per matrix factored, CPU seconds on the intra-op pool's
+    threads, on every other thread) of a loop of batched LU factorisations."""
     iters = min(20_000, max(200, int(3e8 / (batch * n**3))))
     A = jnp.asarray(np.random.default_rng(0).normal(size=(batch, n, n)) + n * np.eye(n))
     loop = jax.jit(lambda A: jax.lax.fori_loop(0, iters, lambda i, A: A + 1e-12 * jsl.lu_factor(A)[0], A))
     loop(A).block_until_ready()
-    before = thread_cpu_seconds()
+    before, start = thread_cpu_seconds(), time.perf_counter()
     loop(A).block_until_ready()
-    after = thread_cpu_seconds()
+    wall, after = time.perf_counter() - start, thread_cpu_seconds()
     pool = other = 0.0
     for key, seconds in after.items():
         spent = seconds - before.get(key, 0.0)
@@ -63,7 +64,7 @@ def cpu_by_pool(n: int, batch: int) -> tuple[float, float]:
             pool += spent
         else:
             other += spent
-    return pool, other
+    return 1e6 * wall / (iters * batch), pool, other
 
 
 def main() -> None:
@@ -71,12 +72,13 @@ def main() -> None:
     parser.add_argument("--sizes", default="2,8,12,16,27")
     parser.add_argument("--batches", default="8,16,32,64,128")
     args = parser.parse_args()
-    print(f"{'n':>4} {'batch':>6} {'work B n^3':>11} {'pool cpu s':>11} {'other cpu s':>12}  split")
+    print(f"{'n':>4} {'batch':>6} {'work B n^3':>11} {'us/matrix':>10} {'pool cpu s':>11} {'other cpu s':>12}  split")
     for n in map(int, args.sizes.split(",")):
         for batch in map(int, args.batches.split(",")):
-            pool, other = cpu_by_pool(n, batch)
+            us, pool, other = cpu_by_pool(n, batch)
             split = "yes" if pool > 0.1 * (pool + other) else "no"
-            print(f"{n:4d} {batch:6d} {batch * n**3:11.3g} {pool:11.2f} {other:12.2f}  {split}", flush=True)
+            print(f"{n:4d} {batch:6d} {batch * n**3:11.3g} {us:10.2f} {pool:11.2f} {other:12.2f}  {split}",
+                  flush=True)
 
 
 if __name__ == "__main__":
