@@ -99,6 +99,10 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_sweep); "
                                              "run again to resume an interrupted sweep")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    hosts = sw.add_argument_group("several processes or hosts (jax.distributed; start the same command in each)")
+    hosts.add_argument("--coordinator", metavar="HOST:PORT", help="address where process 0 listens")
+    hosts.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
+    hosts.add_argument("--process-id", type=int, metavar="I", help="this process's index, in [0, N)")
 
     bn = sub.add_parser("bench", help="time per step, batched throughput, compile time, float32 vs float64")
     bn.add_argument("--scenes", help="comma-separated scenes (default: all)")
@@ -268,6 +272,15 @@ def _sweep(args) -> int:
 
     grid = parse_grid(args.grid)
     hs = None if args.h is None else _step_sizes(args.h)
+    hosts = (args.coordinator, args.num_processes, args.process_id)
+    if any(x is not None for x in hosts):
+        if any(x is None for x in hosts):
+            raise ConfigError("--coordinator, --num-processes and --process-id go together")
+        if args.devices is not None:
+            raise ConfigError("--devices applies to one process; with several, every process's devices are used")
+        from .distributed import initialize
+
+        initialize(*hosts)  # before anything asks JAX for its devices
     devices = jax.devices() if args.devices is None else jax.devices()[: args.devices]
     if args.devices is not None and not 1 <= args.devices <= len(jax.devices()):
         raise ConfigError(f"--devices must be in [1, {len(jax.devices())}], got {args.devices}")
@@ -281,7 +294,10 @@ def _sweep(args) -> int:
         swept = ", ".join(f"{k}={row[k]:g}" for k in result.swept)
         print(f"warning: run {row['member']} ({swept}) failed at {row['failed_steps']} step(s): {row['result']}",
               file=sys.stderr)
-    print(f"wrote {result.path} and {result.plot}")
+    if result.path is not None:
+        print(f"wrote {result.path} and {result.plot}")
+    else:
+        print(f"process {jax.process_index()} of {jax.process_count()}: process 0 writes the files")
     return 0
 
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from ._simulate import RunTotals, Solution, _cast, _float64_view, _n_steps, precision
 from .batch import BatchRun, member_mesh, member_solution, stack_models
+from .distributed import agree
 from .metrics import relative_l1_error
 from .results import ConfigError
 from .scenes.base import Scene, load_scene
@@ -247,6 +248,9 @@ def sweep(
         overrides: fixed config values for every member.
         out: directory of the batch files, the table and the plot; a sweep
             started again there resumes (the directory must hold the same sweep).
+            With several processes (:mod:`nsga_jax.distributed`) process 0
+            writes the files and decides which batches a resumed sweep skips;
+            the other processes' results hold the rows they ran or can read.
         batch_size: members per compiled batch (default: from the model's size,
             :func:`default_batch_size`); rounded up to a multiple of the devices.
         devices: the devices the members are split over (default: all of them;
@@ -280,8 +284,8 @@ def sweep(
     for k in range(n_batches):
         batch = mems[k * batch_size:(k + 1) * batch_size]
         path = None if out_dir is None else out_dir / "batches" / f"batch_{k:05d}.csv"
-        if path is not None and path.exists():
-            rows = read_csv(path)
+        if agree(path is not None and path.exists()):  # process 0 decides: every process skips or runs it
+            rows = read_csv(path) if path.exists() else []
         else:
             rows, compile_time, wall = _batch_rows(batch, padded, mesh, max_records)
             result.compile_time += compile_time

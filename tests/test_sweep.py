@@ -3,6 +3,8 @@ sharding over two (forced) CPU devices giving the same table."""
 
 import csv
 import os
+import re
+import socket
 import subprocess
 import sys
 import textwrap
@@ -25,6 +27,19 @@ TIMING = {"batch_wall_s"}
 def table(path: Path) -> list[dict]:
     with open(path, newline="") as f:
         return [{k: v for k, v in r.items() if k not in TIMING} for r in csv.DictReader(f)]
+
+
+def assert_same_table(a: Path, b: Path) -> None:
+    """The same rows, numbers to 1e-12 (member splits may batch LAPACK calls differently)."""
+    a, b = table(a), table(b)
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b):
+        assert ra.keys() == rb.keys()
+        for k in ra:
+            try:
+                assert float(ra[k]) == pytest.approx(float(rb[k]), rel=1e-12, abs=1e-15), k
+            except ValueError:
+                assert ra[k] == rb[k], k
 
 
 def run_python(code: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
@@ -156,15 +171,73 @@ def test_sharded_sweep_equals_unsharded(tmp_path, name):
     assert proc.returncode == 0, proc.stderr[-3000:]
     single = tmp_path / "single"
     sweep(name, grid, hs=hs, overrides=overrides, out=single, batch_size=4)
-    a, b = table(sharded / "sweep.csv"), table(single / "sweep.csv")
-    assert len(a) == len(grid["e"]) * len(hs)
-    for ra, rb in zip(a, b):
-        assert ra.keys() == rb.keys()
-        for k in ra:
-            try:
-                assert float(ra[k]) == pytest.approx(float(rb[k]), rel=1e-12, abs=1e-15), k
-            except ValueError:
-                assert ra[k] == rb[k], k
+    assert len(table(sharded / "sweep.csv")) == len(grid["e"]) * len(hs)
+    assert_same_table(sharded / "sweep.csv", single / "sweep.csv")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def sweep_on_two_processes(out: Path, *args: str) -> list[subprocess.CompletedProcess]:
+    """``nsga-jax sweep ... --out out`` as two processes joined by jax.distributed
+    over loopback, one CPU device each."""
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    cmd = [sys.executable, "-m", "nsga_jax.cli", "sweep", *args, "--out", str(out), "--quiet", "--no-cache",
+           "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2"]
+    procs = [subprocess.Popen([*cmd, "--process-id", str(i)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for i in range(2)]
+    done = []
+    for p in procs:
+        try:
+            stdout, stderr = p.communicate(timeout=300)
+        except subprocess.TimeoutExpired:
+            for q in procs:
+                q.kill()
+            raise
+        done.append(subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr))
+    return done
+
+
+def test_sweep_over_two_processes_equals_one_process(tmp_path):
+    args = ["bouncing_ball", "--grid", "e=0.3;0.6;0.9", "--h", "2e-3", "--set", "t_end=0.5", "--batch-size", "2"]
+    hosts = tmp_path / "hosts"
+    procs = sweep_on_two_processes(hosts, *args)
+    for p in procs:
+        assert p.returncode == 0, p.stderr[-3000:]
+    assert "3 runs on 2 device(s)" in procs[0].stdout and "3 runs on 2 device(s)" in procs[1].stdout
+    assert "wrote" in procs[0].stdout and "process 0 writes the files" in procs[1].stdout
+    single = tmp_path / "single"
+    assert main(["sweep", *args, "--out", str(single), "--quiet"]) == 0
+    assert_same_table(hosts / "sweep.csv", single / "sweep.csv")
+
+    # resumed on two processes: process 0 decides which batches exist, both skip batch 0
+    first = hosts / "batches" / "batch_00000.csv"
+    written = first.stat().st_mtime_ns
+    (hosts / "batches" / "batch_00001.csv").unlink()
+    (hosts / "sweep.csv").unlink()
+    for p in sweep_on_two_processes(hosts, *args):
+        assert p.returncode == 0, p.stderr[-3000:]
+    assert first.stat().st_mtime_ns == written
+    assert_same_table(hosts / "sweep.csv", single / "sweep.csv")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--coordinator", "127.0.0.1:1234"], "go together"),
+    (["--coordinator", "127.0.0.1", "--num-processes", "2", "--process-id", "0"], "HOST:PORT"),
+    (["--coordinator", "127.0.0.1:0", "--num-processes", "2", "--process-id", "0"], "HOST:PORT"),
+    (["--coordinator", "127.0.0.1:1234", "--num-processes", "0", "--process-id", "0"], "num_processes"),
+    (["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "2"],
+     r"process_id must be .* \[0, 1\]"),
+    (["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "0", "--devices", "1"],
+     "--devices applies to one process"),
+])
+def test_bad_process_settings_refused_before_joining(tmp_path, capsys, argv, message):
+    assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--out", str(tmp_path / "s"), *argv]) == 2
+    assert re.search(message, capsys.readouterr().err)
 
 
 def test_only_a_batch_over_several_cpu_devices_bounds_its_lapack_calls():
