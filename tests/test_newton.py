@@ -11,7 +11,7 @@ import pytest
 import nsga_jax
 from nsga_jax import simulate
 from nsga_jax.integrators.linalg import Factorisation
-from nsga_jax.integrators.newton import Problem, Residual, newton
+from nsga_jax.integrators.newton import Problem, Residual, newton, where_needed
 from nsga_jax.scenes.base import REGISTRY, load_scene, make_scheme, parametrize
 
 N = 6
@@ -137,3 +137,73 @@ def test_gradients_with_reused_factorisations():
         grads.append(float(jax.jit(jax.grad(loss))(params)["length"]))
     assert abs(grads[1]) > 1e-8
     np.testing.assert_allclose(grads[0], grads[1], rtol=1e-6)
+
+
+def counting(fn, calls: list):
+    """``fn`` that appends to ``calls`` whenever it is evaluated (at run time)."""
+
+    def counted(*args):
+        jax.debug.callback(lambda: calls.append(1))
+        return fn(*args)
+
+    return counted
+
+
+def test_where_needed_evaluates_only_when_a_member_needs_it():
+    calls = []
+    double = counting(lambda x: 2 * x, calls)
+    batched = jax.jit(jax.vmap(lambda p, x: where_needed(p, lambda: double(x), x)))
+    x = jnp.arange(3.0)
+    np.testing.assert_array_equal(batched(jnp.array([False, False, False]), x), x)
+    assert calls == []  # a select of both branches would have evaluated it
+    np.testing.assert_array_equal(batched(jnp.array([False, True, False]), x), [0.0, 2.0, 2.0])
+    assert calls  # evaluated, and kept for member 1 only
+    calls.clear()
+    alone = jax.jit(lambda p, x: where_needed(p, lambda: double(x), x))
+    assert float(alone(False, 1.5)) == 1.5 and calls == []
+    assert float(alone(True, 1.5)) == 3.0 and calls
+
+
+def test_a_batch_holding_good_factorisations_never_refactors():
+    """vmap over members of a modified Newton solve: held factorisations that
+    serve every member are never replaced, and nothing is refactored (the
+    refactoring branch is skipped, not computed and discarded)."""
+    strengths = jnp.array([0.02, 0.05])
+    calls = []
+
+    def problem(strength):
+        p = cubic(strength)
+        return p._replace(linearise=counting(p.linearise, calls))
+
+    held = cubic(0.0).linearise(jnp.zeros(N), None)
+    solve = jax.jit(jax.vmap(lambda s: newton(problem(s), jnp.zeros(N), 50, held)))
+    sol = solve(strengths)
+    assert bool(sol.converged.all()) and calls == []
+    for k, s in enumerate(strengths):
+        np.testing.assert_allclose(sol.x[k], run(cubic(float(s))).x, atol=1e-12)
+    poor = jax.jit(jax.vmap(lambda s, f: newton(problem(s), jnp.zeros(N), 50, f)))
+    factors = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), held,
+                                     Factorisation.of(10.0 * A, jnp.zeros(()), jnp.zeros(())))
+    sol = poor(strengths, factors)
+    assert bool(sol.converged.all()) and calls
+    np.testing.assert_array_equal(sol.factorisation.lu[0], held.lu)  # member 0 kept its good one
+    assert not np.allclose(sol.factorisation.lu[1], 10.0 * A)
+
+
+def test_a_batch_with_held_factorisations_equals_single_runs():
+    """Rigid boxes with different restitutions, factorisations held (their
+    contacts, and so their refactorings, come at different steps): the batch
+    gives each member's single run."""
+    from nsga_jax.batch import BatchRun, stack_models
+
+    settings = {"z0": 0.3, "t_end": 0.2, "h": 2e-3}
+    scenes = [load_scene("rigid_box", {**settings, "e": e}) for e in (0.2, 0.9)]
+    scheme = dataclasses.replace(scenes[0].scheme(), reuse_min_dof=0)
+    n = 100
+    run = BatchRun(stack_models([s.model for s in scenes]), scheme, 0.0, np.stack([s.q0 for s in scenes]),
+                   np.stack([s.v0 for s in scenes]), np.full(2, 2e-3), np.full(2, n))
+    q = np.concatenate([out.q for out, _ in run.chunks()], axis=1)
+    for k, scene in enumerate(scenes):
+        single = simulate(scene.model, scheme, 0.0, 0.2, 2e-3, scene.q0, scene.v0)
+        assert single.records.active_velocity.any()
+        np.testing.assert_allclose(q[k, :n], single.q[1:], rtol=0, atol=1e-9 * np.abs(single.q).max())

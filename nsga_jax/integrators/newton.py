@@ -85,6 +85,34 @@ class NewtonResult(eqx.Module):
     factorisation: Factorisation | None = None
 
 
+@jax.custom_batching.custom_vmap
+def any_member(pred: jax.Array) -> jax.Array:
+    """``pred`` (a bool scalar), and under ``vmap`` whether it holds for any
+    member, as one unbatched value."""
+    return pred
+
+
+@any_member.def_vmap
+def _any_member_rule(axis_size, in_batched, pred):
+    return (jnp.any(pred) if in_batched[0] else pred), False
+
+
+def where_needed(pred: jax.Array, fn: Callable[[], Any], otherwise: Any) -> Any:
+    """``fn()`` if ``pred`` else ``otherwise`` (a pytree shaped as fn's result),
+    evaluating ``fn`` only when needed, also under ``vmap``.
+
+    ``lax.cond`` with a batched predicate becomes a select of both branches, so
+    every member of a batch would refactor at every iteration. Here the branch
+    is taken when ``pred`` holds for any member (:func:`any_member`, unbatched,
+    so the ``cond`` stays one), and its result kept where ``pred`` holds.
+    """
+
+    def needed():
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(pred, a, b), fn(), otherwise)
+
+    return lax.cond(any_member(pred), needed, lambda: otherwise)
+
+
 def convergence_bound(terms: list[jax.Array], tol_r: Scalar, tol_f: Scalar) -> Scalar:
     """Right-hand side of eq. 51: ``tol_r * (sum_k ||r_k|| + tol_f)``."""
     total = sum((jnp.linalg.norm(t) for t in terms), jnp.zeros(()))
@@ -131,7 +159,7 @@ def newton(
 
     def body_reusing(carry):
         x, res, floor, it, held, refactor, margin = carry
-        held = lax.cond(refactor, lambda: problem.linearise(x, res), lambda: held)
+        held = where_needed(refactor, lambda: problem.linearise(x, res), held)
         dx, new_floor = problem.correct(x, res, held)
         x_new = jax.tree_util.tree_map(jnp.add, x, dx)
         res_new = residual(x_new)
