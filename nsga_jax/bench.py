@@ -97,9 +97,16 @@ def _single(scene: Scene, dtype: str, repeats: int):
     return runs[0], best, shortest.run(dtype=dtype, throw=False).compile_time
 
 
-def _batched(scene: Scene, dtype: str, batch: int, repeats: int) -> tuple[float, float, float]:
+PROBE_FRACTION = 20
+"""A batch's run time is estimated from a probe of its first 1/PROBE_FRACTION
+steps (at least 2) before it is measured in full."""
+
+
+def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
+             max_seconds: float) -> tuple[float, float, float] | float:
     """(compile time, best wall time, compile time from the persistent cache) of
-    ``batch`` identical members."""
+    ``batch`` identical members; or, when a probe of its first steps says one
+    run would take longer than ``max_seconds``, that estimate [s]."""
     n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
     with precision(dtype):
         model, scheme = _cast((scene.model, scene.scheme()), dtype)
@@ -107,16 +114,22 @@ def _batched(scene: Scene, dtype: str, batch: int, repeats: int) -> tuple[float,
         q0 = np.tile(scene.q0.astype(dtype), (batch, 1))
         v0 = np.tile(scene.v0.astype(dtype), (batch, 1))
         hs = np.full(batch, scene.solver["h"], dtype)
-        compile_s, best = None, np.inf
-        for _ in range(repeats):
-            run = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, n))
-            for _ in run.chunks():
+
+        def run(steps: int) -> BatchRun:
+            out = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, steps))
+            for _ in out.chunks():
                 pass
-            compile_s = run.compile_time if compile_s is None else compile_s
-            best = min(best, run.wall_time)
+            return out
+
+        probe_steps = min(n, max(2, n // PROBE_FRACTION))
+        probe = run(probe_steps)  # the first, cold compilation: the same programs whatever the step count
+        estimate = probe.wall_time * n / probe_steps
+        if estimate > max_seconds:
+            return estimate
+        best = min(run(n).wall_time for _ in range(repeats))
         jax.clear_caches()
         cached = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, n)).compile_time
-    return compile_s, best, cached
+    return probe.compile_time, best, cached
 
 
 def bench(
@@ -139,8 +152,11 @@ def bench(
     same configuration, which loads the programs from the cache (what every
     run but the first costs with the command line's cache on).
 
-    A batched configuration whose estimated run time (members × steps × the
-    single run's time per step) exceeds ``max_seconds`` is skipped and said so.
+    A batched configuration whose estimated run time exceeds ``max_seconds``
+    is skipped and said so: first from the single run's speed (members ×
+    steps × its time per step), then from a probe of the batch's own first
+    steps (:data:`PROBE_FRACTION`), since a batch can be slower per member
+    than single runs (the cube's).
     Each row is appended to ``out/bench.csv`` as soon as it is measured.
     """
     scenes = list(REGISTRY) if scenes is None else list(scenes)
@@ -204,7 +220,13 @@ def _measure(scenes, batches, dtypes, scheme, repeats, max_steps, max_seconds, p
                               f"--max-seconds {max_seconds:g})", flush=True)
                     continue
                 else:
-                    compile_s, wall_b, cached = _batched(scene, dtype, batch, repeats)
+                    measured = _batched(scene, dtype, batch, repeats, max_seconds)
+                    if isinstance(measured, float):
+                        if progress:
+                            print(f"{name} {dtype} batch {batch}: skipped (about {measured:.0f} s a run, "
+                                  f"from its first steps; --max-seconds {max_seconds:g})", flush=True)
+                        continue
+                    compile_s, wall_b, cached = measured
                     us = 1e6 * wall_b / steps
                 row = {**common, "batch": batch, "us_per_step": us, "member_steps_per_s": batch * 1e6 / us,
                        "speedup_vs_single": batch * single_us / us, "compile_s": compile_s,

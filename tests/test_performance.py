@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nsga_jax import simulate
-from nsga_jax.bench import COLUMNS, bench
+from nsga_jax.bench import COLUMNS, _batched, _bench_scene, bench
 from nsga_jax.integrators.base import output_template
 from nsga_jax.integrators.linalg import band_product
 from nsga_jax.results import ConfigError
@@ -105,6 +105,17 @@ def test_bench_writes_its_table(tmp_path):
     assert all(0 < r["float32_error"] < 1e-4 for r in f32)
     assert {(r["dtype"], r["batch"]) for r in rows} == {("float64", 1), ("float64", 8), ("float32", 1),
                                                        ("float32", 8)}
+
+
+def test_a_batch_is_skipped_on_its_probes_estimate():
+    """A batch whose first steps say a run would exceed max_seconds is not run
+    in full; the estimate scales the probe to every step."""
+    scene = _bench_scene("bouncing_ball", {"scheme": "ds"}, 400)
+    estimate = _batched(scene, "float64", 8, 1, max_seconds=1e-9)
+    assert isinstance(estimate, float) and estimate > 0
+    compile_s, wall, cached = _batched(scene, "float64", 8, 1, max_seconds=1e9)
+    assert compile_s > 0 and cached > 0
+    assert wall > estimate * 0.05  # the full run is 20 probes long (order of magnitude)
 
 
 @pytest.mark.parametrize("scheme", ["ds", "dsn", "cs", "mj"])
