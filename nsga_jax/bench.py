@@ -115,18 +115,20 @@ def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
         v0 = np.tile(scene.v0.astype(dtype), (batch, 1))
         hs = np.full(batch, scene.solver["h"], dtype)
 
-        def run(steps: int) -> BatchRun:
+        def run(steps: int) -> tuple[BatchRun, float]:
+            """The batch run for ``steps`` steps, and its preparation's wall time [s]."""
             out = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, steps))
+            prepared = out.wall_time
             for _ in out.chunks():
                 pass
-            return out
+            return out, prepared
 
         probe_steps = min(n, max(2, n // PROBE_FRACTION))
-        probe = run(probe_steps)  # the first, cold compilation: the same programs whatever the step count
-        estimate = probe.wall_time * n / probe_steps
+        probe, prepared = run(probe_steps)  # the first, cold compilation: the same programs whatever the steps
+        estimate = prepared + (probe.wall_time - prepared) * n / probe_steps
         if estimate > max_seconds:
             return estimate
-        best = min(run(n).wall_time for _ in range(repeats))
+        best = min(run(n)[0].wall_time for _ in range(repeats))
         jax.clear_caches()
         cached = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, n)).compile_time
     return probe.compile_time, best, cached
