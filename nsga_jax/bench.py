@@ -98,8 +98,10 @@ def _single(scene: Scene, dtype: str, repeats: int):
 
 
 PROBE_FRACTION = 20
+PROBE_MIN_STEPS = 10
 """A batch's run time is estimated from a probe of its first 1/PROBE_FRACTION
-steps (at least 2) before it is measured in full."""
+steps (at least PROBE_MIN_STEPS: a first step can cost several later ones,
+the cube's factoring every member's matrices) before it is measured in full."""
 
 
 def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
@@ -123,7 +125,7 @@ def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
                 pass
             return out, prepared
 
-        probe_steps = min(n, max(2, n // PROBE_FRACTION))
+        probe_steps = min(n, max(PROBE_MIN_STEPS, n // PROBE_FRACTION))
         probe, prepared = run(probe_steps)  # the first, cold compilation: the same programs whatever the steps
         estimate = prepared + (probe.wall_time - prepared) * n / probe_steps
         if estimate > max_seconds:
