@@ -308,19 +308,24 @@ def sweep(
 
 def _claim(out_dir: Path, scene, grid, hs, overrides, batch_size: int, n: int) -> None:
     """Write ``DIR/sweep.json`` describing the sweep, or check that the one
-    there describes the same sweep (else resuming would mix two sweeps)."""
+    there describes the same sweep (else resuming would mix two sweeps).
+
+    Process 0 alone reads and writes it, and every process raises if it holds
+    another sweep (:func:`~nsga_jax.distributed.agree`): no process reads a
+    half-written file, and none goes on into batches the others refused."""
     spec = {"scene": str(scene), "grid": {k: [float(x) for x in np.atleast_1d(v)] for k, v in grid.items()},
             "hs": None if hs is None else [float(h) for h in np.atleast_1d(hs)],
             "overrides": {k: v for k, v in (overrides or {}).items()}, "batch_size": batch_size, "members": n}
     manifest = out_dir / "sweep.json"
-    if manifest.exists():
-        old = json.loads(manifest.read_text())
-        if old != json.loads(json.dumps(spec)):
-            raise ConfigError(f"{out_dir} holds another sweep ({manifest}); use another directory or remove it")
-        return
-    if jax.process_index() == 0:  # one writer when several hosts share the directory
-        (out_dir / "batches").mkdir(parents=True, exist_ok=True)
-        manifest.write_text(json.dumps(spec, indent=2) + "\n")
+    same = True
+    if jax.process_index() == 0:
+        if manifest.exists():
+            same = json.loads(manifest.read_text()) == json.loads(json.dumps(spec))
+        else:
+            (out_dir / "batches").mkdir(parents=True, exist_ok=True)
+            manifest.write_text(json.dumps(spec, indent=2) + "\n")
+    if not agree(same):
+        raise ConfigError(f"{out_dir} holds another sweep ({manifest}); use another directory or remove it")
 
 
 def _progress(done: int, total: int, members_done: int, members: int, elapsed: float) -> None:

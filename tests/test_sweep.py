@@ -181,15 +181,16 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def sweep_on_two_processes(out: Path, *args: str) -> list[subprocess.CompletedProcess]:
-    """``nsga-jax sweep ... --out out`` as two processes joined by jax.distributed
-    over loopback, one CPU device each."""
+def sweep_on_two_processes(outs: tuple[Path, Path], *args: str) -> list[subprocess.CompletedProcess]:
+    """``nsga-jax sweep ...`` as two processes joined by jax.distributed over
+    loopback, one CPU device each, process i writing to ``outs[i]`` (one
+    folder for both is a shared file system; two are two hosts' own disks)."""
     port = free_port()
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    cmd = [sys.executable, "-m", "nsga_jax.cli", "sweep", *args, "--out", str(out), "--quiet", "--no-cache",
+    cmd = [sys.executable, "-m", "nsga_jax.cli", "sweep", *args, "--quiet", "--no-cache",
            "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2"]
-    procs = [subprocess.Popen([*cmd, "--process-id", str(i)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for i in range(2)]
+    procs = [subprocess.Popen([*cmd, "--out", str(outs[i]), "--process-id", str(i)], cwd=ROOT, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
     done = []
     for p in procs:
         try:
@@ -202,27 +203,47 @@ def sweep_on_two_processes(out: Path, *args: str) -> list[subprocess.CompletedPr
     return done
 
 
+ARGS = ["bouncing_ball", "--grid", "e=0.3;0.6;0.9", "--h", "2e-3", "--set", "t_end=0.5", "--batch-size", "2"]
+
+
 def test_sweep_over_two_processes_equals_one_process(tmp_path):
-    args = ["bouncing_ball", "--grid", "e=0.3;0.6;0.9", "--h", "2e-3", "--set", "t_end=0.5", "--batch-size", "2"]
-    hosts = tmp_path / "hosts"
-    procs = sweep_on_two_processes(hosts, *args)
+    shared = tmp_path / "shared"
+    procs = sweep_on_two_processes((shared, shared), *ARGS)
     for p in procs:
         assert p.returncode == 0, p.stderr[-3000:]
     assert "3 runs on 2 device(s)" in procs[0].stdout and "3 runs on 2 device(s)" in procs[1].stdout
     assert "wrote" in procs[0].stdout and "process 0 writes the files" in procs[1].stdout
     single = tmp_path / "single"
-    assert main(["sweep", *args, "--out", str(single), "--quiet"]) == 0
-    assert_same_table(hosts / "sweep.csv", single / "sweep.csv")
+    assert main(["sweep", *ARGS, "--out", str(single), "--quiet"]) == 0
+    assert_same_table(shared / "sweep.csv", single / "sweep.csv")
 
-    # resumed on two processes: process 0 decides which batches exist, both skip batch 0
-    first = hosts / "batches" / "batch_00000.csv"
-    written = first.stat().st_mtime_ns
-    (hosts / "batches" / "batch_00001.csv").unlink()
-    (hosts / "sweep.csv").unlink()
-    for p in sweep_on_two_processes(hosts, *args):
+    # another sweep in that folder: process 0 refuses it, and so does process 1 (it does not wait for it)
+    other = [*ARGS[:2], "e=0.4", *ARGS[3:]]
+    for p in sweep_on_two_processes((shared, shared), *other):
+        assert p.returncode == 2 and "holds another sweep" in p.stderr, p.stderr[-3000:]
+
+
+def test_two_processes_resume_as_process_0_decides(tmp_path):
+    """Each process with its own folder (two hosts' disks): process 1 never
+    sees the batch files, yet skips the batch process 0 has, instead of
+    running it alone and waiting for process 0 in it."""
+    own = (tmp_path / "host0", tmp_path / "host1")
+    for p in sweep_on_two_processes(own, *ARGS):
         assert p.returncode == 0, p.stderr[-3000:]
-    assert first.stat().st_mtime_ns == written
-    assert_same_table(hosts / "sweep.csv", single / "sweep.csv")
+    assert not own[1].exists()  # process 1 wrote nothing
+    whole = own[0] / "sweep.csv"
+    kept = tmp_path / "whole.csv"
+    kept.write_bytes(whole.read_bytes())
+    first = own[0] / "batches" / "batch_00000.csv"
+    written = first.stat().st_mtime_ns
+    (own[0] / "batches" / "batch_00001.csv").unlink()
+    whole.unlink()
+    procs = sweep_on_two_processes(own, *ARGS)
+    for p in procs:
+        assert p.returncode == 0, p.stderr[-3000:]
+    assert first.stat().st_mtime_ns == written  # batch 0 was not run again
+    assert_same_table(whole, kept)
+    assert "1 runs on 2 device(s)" in procs[1].stdout  # process 1 holds the rows it ran
 
 
 @pytest.mark.parametrize("argv, message", [
