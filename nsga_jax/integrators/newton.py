@@ -31,7 +31,8 @@ made with it did not shrink the residual by :data:`CONTRACTION` (that update
 is then discarded). A fresh factorisation's update is always taken, as in
 Newton's method, so the iteration is never worse than Newton's; at small
 steps, where the matrix changes little, most iterations are one residual and
-one pair of triangular solves.
+one pair of triangular solves. In a batch (``vmap``) the members refactor
+together, and only when one of them needs it (:func:`where_needed`).
 """
 
 from __future__ import annotations
