@@ -140,3 +140,20 @@ def test_record_template_matches_the_step(name, scheme):
 def test_bad_bench_settings_are_refused_by_name(settings, message):
     with pytest.raises(ConfigError, match=message):
         bench(["bouncing_ball"], **{"batches": [1], "dtypes": ["float64"], **settings}, progress=False)
+
+
+def test_device_check_agreement_runs(tmp_path):
+    """experiments/device_check.py, the check prepared for a GPU machine, runs
+    as written; here its default device is the CPU, so the two sides agree
+    exactly."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "experiments" / "device_check.py"
+    spec = importlib.util.spec_from_file_location("device_check", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    rows = module.agreement(tmp_path)
+    assert [r["case"] for r in rows] == ["sweep bouncing_ball", "sweep impacting_bar", "flexible_pendulum q"]
+    assert all(r["max_rel_difference"] == 0.0 for r in rows)
+    assert (tmp_path / "agreement.csv").exists()
