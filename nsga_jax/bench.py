@@ -105,10 +105,11 @@ the cube's factoring every member's matrices) before it is measured in full."""
 
 
 def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
-             max_seconds: float) -> tuple[float, float, float] | float:
-    """(compile time, best wall time, compile time from the persistent cache) of
-    ``batch`` identical members; or, when a probe of its first steps says one
-    run would take longer than ``max_seconds``, that estimate [s]."""
+             max_seconds: float) -> tuple[float, tuple[float, float, float] | None]:
+    """``(estimate, timing)`` of ``batch`` identical members: one run's time
+    [s] estimated from a probe of its first steps, and (compile time, best
+    wall time, compile time from the persistent cache), or ``None`` when the
+    estimate exceeds ``max_seconds`` (the batch is then not run in full)."""
     n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
     with precision(dtype):
         model, scheme = _cast((scene.model, scene.scheme()), dtype)
@@ -129,11 +130,11 @@ def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
         probe, prepared = run(probe_steps)  # the first, cold compilation: the same programs whatever the steps
         estimate = prepared + (probe.wall_time - prepared) * n / probe_steps
         if estimate > max_seconds:
-            return estimate
+            return estimate, None
         best = min(run(n)[0].wall_time for _ in range(repeats))
         jax.clear_caches()
         cached = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, n)).compile_time
-    return probe.compile_time, best, cached
+    return estimate, (probe.compile_time, best, cached)
 
 
 def bench(
@@ -217,20 +218,18 @@ def _measure(scenes, batches, dtypes, scheme, repeats, max_steps, max_seconds, p
             for batch in batches:
                 if batch == 1:
                     compile_s, us, cached = single.compile_time, single_us, single_cached
-                elif batch * steps * single_us * 1e-6 > max_seconds:
-                    if progress:
-                        print(f"{name} {dtype} batch {batch}: skipped (about "
-                              f"{batch * steps * single_us * 1e-6:.0f} s at the single run's speed; "
-                              f"--max-seconds {max_seconds:g})", flush=True)
-                    continue
                 else:
-                    measured = _batched(scene, dtype, batch, repeats, max_seconds)
-                    if isinstance(measured, float):
+                    estimate, timing = batch * steps * single_us * 1e-6, None
+                    how = "at the single run's speed"
+                    if estimate <= max_seconds:
+                        estimate, timing = _batched(scene, dtype, batch, repeats, max_seconds)
+                        how = "from its first steps"
+                    if timing is None:
                         if progress:
-                            print(f"{name} {dtype} batch {batch}: skipped (about {measured:.0f} s a run, "
-                                  f"from its first steps; --max-seconds {max_seconds:g})", flush=True)
+                            print(f"{name} {dtype} batch {batch}: skipped (about {estimate:.0f} s a run, {how}; "
+                                  f"--max-seconds {max_seconds:g})", flush=True)
                         continue
-                    compile_s, wall_b, cached = measured
+                    compile_s, wall_b, cached = timing
                     us = 1e6 * wall_b / steps
                 row = {**common, "batch": batch, "us_per_step": us, "member_steps_per_s": batch * 1e6 / us,
                        "speedup_vs_single": batch * single_us / us, "compile_s": compile_s,
