@@ -4,6 +4,8 @@ built from a validated config (a built-in name or a TOML file)."""
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
+import sys
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -20,7 +22,7 @@ from ..integrators.ds import DS, DSn
 from ..integrators.mj import MJ
 from ..models.base import Model
 from ..results import ConfigError
-from .params import SOLVER_PARAMS, Param, check_all
+from .params import SOLVER_PARAMS, Param, check_all, check_solver
 
 
 @dataclass
@@ -162,36 +164,118 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, value
 
 
+SCENE_FILE_SUFFIXES = (".toml", ".py")
+
+
+def _read_config(path: Path) -> dict[str, Any]:
+    """A TOML config's tables, checked for shape: ``scene`` a string,
+    ``parameters`` and ``solver`` tables, nothing else."""
+    if not path.is_file():
+        what = "is a folder" if path.is_dir() else "does not exist"
+        raise ConfigError(f"config file {str(path)!r} {what}")
+    try:
+        data = tomllib.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not a UTF-8 text file ({err.reason} at byte {err.start})") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: invalid TOML: {err}") from None
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot be read ({err.strerror})") from None
+    unknown = sorted(set(data) - {"scene", "parameters", "solver"})
+    if unknown:
+        raise ConfigError(f"{path}: unknown top-level key {unknown[0]!r}; allowed: scene, parameters, solver")
+    if "scene" not in data:
+        raise ConfigError(f"{path}: missing key 'scene' (one of {', '.join(sorted(REGISTRY))}, or a scene file)")
+    if not isinstance(data["scene"], str):
+        raise ConfigError(f"{path}: 'scene' must be a string (a scene name or a .py scene file), "
+                          f"got {type(data['scene']).__name__} {data['scene']!r}")
+    for table in ("parameters", "solver"):
+        if not isinstance(data.get(table, {}), dict):
+            raise ConfigError(f"{path}: [{table}] must be a table of key = value pairs, "
+                              f"got {type(data[table]).__name__} {data[table]!r}")
+    return data
+
+
+_SCENE_FILES: dict[Path, tuple[str, ...]] = {}
+
+
+def load_scene_file(path: str | Path) -> tuple[str, ...]:
+    """Import a Python file that registers scenes (``register(SceneSpec(...))``)
+    and return the names it registered. A file is imported once per process;
+    later calls return the same names."""
+    path = Path(path).expanduser()
+    if not path.is_file():
+        raise ConfigError(f"scene file {str(path)!r} does not exist")
+    path = path.resolve()
+    if path not in _SCENE_FILES:
+        before = dict(REGISTRY)
+        name = f"nsga_jax_scene_file_{len(_SCENE_FILES)}_{path.stem}"
+        spec = importlib.util.spec_from_file_location(name, path)
+        if spec is None or spec.loader is None:
+            raise ConfigError(f"scene file {str(path)!r} cannot be imported as Python")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)  # errors in the user's file keep their traceback
+        added = tuple(k for k, v in REGISTRY.items() if before.get(k) is not v)
+        if not added:
+            raise ConfigError(f"scene file {str(path)!r} registers no scene; call "
+                              "nsga_jax.scenes.register(SceneSpec(...)) in it")
+        _SCENE_FILES[path] = added
+    return _SCENE_FILES[path]
+
+
+def resolve_scene(name_or_path: str | Path, relative_to: Path | None = None) -> tuple[str, Path | None]:
+    """``(scene name, config path or None)`` for a built-in name, a ``.toml``
+    config, a ``.py`` scene file, or ``file.py:name`` (one of several scenes
+    a file registers). A built-in name is a name even where a file or folder
+    of that name exists."""
+    text = str(name_or_path)
+    if text in REGISTRY and not text.endswith(SCENE_FILE_SUFFIXES):
+        return text, None
+    file, _, chosen = text.partition(".py:")
+    if chosen or text.endswith(".py"):
+        path = Path(file + ".py" if chosen else text)
+        if relative_to is not None and not path.is_absolute():
+            path = relative_to / path
+        names = load_scene_file(path)
+        if chosen:
+            if chosen not in names:
+                raise ConfigError(f"scene file {str(path)!r} registers {', '.join(names)}, not {chosen!r}")
+            return chosen, None
+        if len(names) > 1:
+            raise ConfigError(f"scene file {str(path)!r} registers several scenes ({', '.join(names)}); "
+                              f"choose one as {path}:NAME")
+        return names[0], None
+    if text.endswith(".toml"):
+        return "", Path(text)
+    hint = " (a file or folder of that name exists, but only .toml configs and .py scene files are read)" \
+        if Path(text).exists() else ""
+    raise ConfigError(f"unknown scene {text!r}{hint}; built-in scenes: {', '.join(sorted(REGISTRY))}; "
+                      "or give a .toml config or a .py scene file")
+
+
 def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
-    """Build a scene from a built-in name or a TOML config, with overrides.
+    """Build a scene from a built-in name, a TOML config or a Python scene
+    file (see :func:`resolve_scene`), with overrides.
 
     Overrides are flat ``key: value`` pairs; a key is looked up among the
     scene's parameters, then the solver settings. Unknown keys, bad values and
     inconsistent setups (e.g. an initial penetration) raise
     :class:`~nsga_jax.ConfigError` before anything is compiled.
     """
+    if not isinstance(name_or_path, (str, Path)):
+        raise TypeError(f"scene must be a scene name or a path (str or pathlib.Path), "
+                        f"got {type(name_or_path).__name__} {name_or_path!r}")
+    if overrides is not None and not isinstance(overrides, dict):
+        raise TypeError(f"overrides must be a dict of key: value, got {type(overrides).__name__}")
     params_in: dict[str, Any] = {}
     solver_in: dict[str, Any] = {}
-    path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
-        if not path.is_file():
-            raise ConfigError(f"config file {str(path)!r} does not exist")
-        try:
-            data = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as err:
-            raise ConfigError(f"{path}: invalid TOML: {err}") from None
-        unknown = sorted(set(data) - {"scene", "parameters", "solver"})
-        if unknown:
-            raise ConfigError(f"{path}: unknown top-level key {unknown[0]!r}; allowed: scene, parameters, solver")
-        if "scene" not in data:
-            raise ConfigError(f"{path}: missing key 'scene' (one of {', '.join(sorted(REGISTRY))})")
-        name = data["scene"]
+    name, path = resolve_scene(name_or_path)
+    if path is not None:
+        data = _read_config(path)
+        name, _ = resolve_scene(data["scene"], relative_to=path.parent)
         params_in.update(data.get("parameters", {}))
         solver_in.update(data.get("solver", {}))
-    else:
-        name = str(name_or_path)
-    if name not in REGISTRY:
-        raise ConfigError(f"unknown scene {name!r}; built-in scenes: {', '.join(sorted(REGISTRY))}")
     spec = REGISTRY[name]
     solver_specs = spec.solver_specs()
     for key, value in (overrides or {}).items():
@@ -204,8 +288,7 @@ def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | None = None
             raise ConfigError(f"unknown config key {key!r} for scene {name!r}; allowed keys: {allowed}")
     parameters = check_all(f"{name} parameter", spec.parameters, params_in)
     solver = check_all("solver", solver_specs, solver_in)
-    if solver["h"] > solver["t_end"]:
-        raise ConfigError(f"h must be in (0, t_end] = (0, {solver['t_end']}], got {solver['h']}")
+    check_solver(solver)
     return spec.build(parameters, solver)
 
 

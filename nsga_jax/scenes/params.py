@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..results import ConfigError
+from ..validation import time_grid
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,12 @@ SOLVER_PARAMS: dict[str, Param] = {
                           "step; the CLI writes every step to DIR/steps/ when k > 1)", kind="int", lo=1,
                           hi=1_000_000_000),
 }
+
+
+def check_solver(solver: dict[str, Any]) -> None:
+    """Cross-field rules of validated solver settings: h in (0, t_end], a step
+    that advances time in the run's precision, a step count that fits."""
+    time_grid(0.0, solver["t_end"], solver["h"], solver["dtype"], t1_name="t_end")
 
 
 def check_all(section: str, specs: dict[str, Param], values: dict[str, Any]) -> dict[str, Any]:

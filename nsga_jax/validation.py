@@ -1,0 +1,183 @@
+"""One validation vocabulary for every entry point: the command line, config
+files, model constructors, :func:`~nsga_jax.simulate`, batches, sweeps and
+identification.
+
+Every check runs on concrete Python or NumPy values before anything is traced
+or compiled. A wrong Python type (a scheme class where an instance belongs, a
+string where a model belongs) raises :class:`TypeError`; a value of the right
+kind that the physics or the machine cannot take raises
+:class:`~nsga_jax.ConfigError`. Either message names the argument, the value
+and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any
+
+import numpy as np
+
+from .results import ConfigError
+
+MAX_STEPS = 2**62
+"""The most steps a run may take: step counts are Python integers on the host
+and the compiled loops count only within a chunk, so no counter overflows;
+this bound only keeps ``t0 + n h`` meaningful."""
+
+TIME_RESOLUTION = 16.0
+"""A step must be at least this many units in the last place of the run's
+latest time in its precision: below that, ``t + h`` rounds back to ``t`` (or
+to a visibly wrong time) and the run would never advance."""
+
+DENSE_MATRICES = 10
+"""Dense n × n matrices a run holds at once (mass, tangents, the three
+iteration matrices and their factorisations, temporaries): the memory
+estimate of a model of n coordinates is ``DENSE_MATRICES n² × bytes``."""
+
+MEMORY_FRACTION = 0.8
+"""Share of the machine's memory a run may plan to use."""
+
+
+def describe(value: Any) -> str:
+    """A short description of a value for an error message."""
+    if isinstance(value, type):
+        return f"the class {value.__name__} (an instance is needed: {value.__name__}())"
+    text = repr(value)
+    if len(text) > 80:
+        text = text[:77] + "..."
+    return f"{type(value).__name__} {text}"
+
+
+def require_instance(name: str, value: Any, kind: type | tuple[type, ...], expected: str) -> None:
+    """Raise :class:`TypeError` unless ``value`` is an instance of ``kind``."""
+    if not isinstance(value, kind):
+        raise TypeError(f"{name} must be {expected}, got {describe(value)}")
+
+
+def interval_text(lo: float, hi: float, lo_open: bool, hi_open: bool) -> str:
+    left = "(" if lo_open or lo == -math.inf else "["
+    right = ")" if hi_open or hi == math.inf else "]"
+    low = "-inf" if lo == -math.inf else f"{lo:g}"
+    high = "inf" if hi == math.inf else f"{hi:g}"
+    return f"{left}{low}, {high}{right}"
+
+
+def real(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf, *, lo_open: bool = False,
+         hi_open: bool = False, unit: str = "", note: str = "") -> float:
+    """``value`` as a finite float in the interval, else :class:`ConfigError`
+    (booleans and strings are not numbers here)."""
+    label = f"{name} [{unit}]" if unit else name
+    allowed = interval_text(lo, hi, lo_open, hi_open)
+    if isinstance(value, (bool, np.bool_, str, bytes)) or value is None:
+        raise ConfigError(f"{label} must be a real number in {allowed}, got {describe(value)}")
+    try:
+        if np.ndim(value) != 0:
+            raise TypeError
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{label} must be a real number in {allowed}, got {describe(value)}") from None
+    if not math.isfinite(x):
+        raise ConfigError(f"{label} must be finite (in {allowed}), got {value!r}")
+    if x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi):
+        extra = f" ({note})" if note else ""
+        raise ConfigError(f"{label} must be in {allowed}{extra}, got {value!r}")
+    return x
+
+
+def integer(name: str, value: Any, lo: int = 1, hi: int | None = None) -> int:
+    """``value`` as a Python int in [lo, hi], else :class:`ConfigError`
+    (floats with a fractional part, booleans and strings are refused)."""
+    allowed = f"an integer >= {lo}" if hi is None else f"an integer in [{lo}, {hi}]"
+    ok = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if not ok or value < lo or (hi is not None and value > hi):
+        raise ConfigError(f"{name} must be {allowed}, got {value!r}")
+    return int(value)
+
+
+def choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
+    if not isinstance(value, str) or value not in choices:
+        raise ConfigError(f"{name} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+    return value
+
+
+def step_count(t0: float, t1: float, h: float) -> int:
+    """N = floor((t1 - t0) / h) steps (at least one), with a relative slack
+    of 1e-9 so that an h that divides the interval gives its exact count."""
+    n = (t1 - t0) / h
+    return max(1, int(math.floor(n + 1e-9)))
+
+
+def time_grid(t0: Any, t1: Any, h: Any, dtype: str = "float64", *, t1_name: str = "t1") -> tuple[float, float,
+                                                                                              float, int]:
+    """Check a run's times and return ``(t0, t1, h, n_steps)``.
+
+    Rules: finite numbers, ``t1 > t0``, ``h`` in (0, t1 - t0], ``t + h > t``
+    at the latest time in the run's precision (with a margin of
+    :data:`TIME_RESOLUTION` units in the last place), at most
+    :data:`MAX_STEPS` steps.
+    """
+    t0 = real("t0", t0, unit="s")
+    t1 = real(t1_name, t1, unit="s")
+    h = real("h", h, 0.0, lo_open=True, unit="s")
+    if t1 <= t0:
+        raise ConfigError(f"{t1_name} must be finite and greater than t0, got t0={t0}, {t1_name}={t1}")
+    if h > t1 - t0:
+        span = t1_name if t1_name == "t_end" else f"{t1_name} - t0"
+        raise ConfigError(f"h must be in (0, {span}] = (0, {t1 - t0:g}], got {h}")
+    latest = max(abs(t0), abs(t1))
+    resolution = TIME_RESOLUTION * float(np.spacing(np.asarray(latest, dtype=dtype)))
+    if h < resolution:
+        raise ConfigError(f"h = {h:g} s is below the time resolution of {dtype} at t = {latest:g} s "
+                          f"(t + h would round to t): h must be >= {resolution:.3g} s in {dtype}")
+    n_steps = step_count(t0, t1, h)
+    if n_steps > MAX_STEPS:
+        raise ConfigError(f"the run has {n_steps:.3g} steps ((t1 - t0)/h); at most {MAX_STEPS:.3g} are allowed")
+    return t0, t1, h, n_steps
+
+
+def available_memory() -> int:
+    """Bytes a run may plan to use: :data:`MEMORY_FRACTION` of the physical
+    memory of the machine (or of the first accelerator, when JAX runs on one)."""
+    try:
+        import jax
+
+        stats = jax.devices()[0].memory_stats() if jax.devices()[0].platform != "cpu" else None
+        if stats and stats.get("bytes_limit"):
+            return int(MEMORY_FRACTION * stats["bytes_limit"])
+    except Exception:  # no accelerator statistics: the host's memory is the limit
+        pass
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 2**62
+    return int(MEMORY_FRACTION * total)
+
+
+def gigabytes(n_bytes: float) -> str:
+    return f"{n_bytes / 2**30:.3g} GiB"
+
+
+def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 0,
+                 record_numbers: int = 0, what: str = "the model") -> None:
+    """Refuse a run whose dense matrices (:data:`DENSE_MATRICES` n × n per
+    member) and kept records (``records`` steps of ``record_numbers`` numbers
+    per member) would not fit in :func:`available_memory`, naming the estimate."""
+    dense = DENSE_MATRICES * n_dof**2 * itemsize * members
+    kept = records * record_numbers * itemsize * members
+    limit = available_memory()
+    if dense > limit:
+        raise ConfigError(
+            f"{what} has {n_dof} coordinates: its dense iteration matrices need about {gigabytes(dense)} "
+            f"({DENSE_MATRICES} matrices of {n_dof} x {n_dof}{f' for each of {members} runs' if members > 1 else ''}),"
+            f" more than the {gigabytes(limit)} this machine can give; use a coarser mesh")
+    if dense + kept > limit:
+        raise ConfigError(
+            f"keeping the records of {records} steps needs about {gigabytes(kept)} "
+            f"({record_numbers} numbers a step{f' for each of {members} runs' if members > 1 else ''}), more than "
+            f"the {gigabytes(limit - dense)} left; keep every k-th step (record_every / --record-every) "
+            "or shorten the run")
+
+
+__all__ = ["MAX_STEPS", "check_memory", "choice", "describe", "integer", "real", "require_instance",
+           "step_count", "time_grid"]
