@@ -27,7 +27,7 @@ import jax
 import numpy as np
 from nsga_jax.batch import BatchRun, broadcast_members, member_mesh
 from nsga_jax.bench import _bench_scene
-from nsga_jax._simulate import _n_steps
+from nsga_jax.validation import step_count as _n_steps
 name, B = sys.argv[1], int(sys.argv[2])
 scene = _bench_scene(name, {"scheme": "ds"}, 2000)
 n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])

@@ -49,7 +49,7 @@ row = {"us_per_step": min(1e6 * r.wall_time / r.n_steps for r in runs), "compile
 batch = int(sys.argv[3])
 if batch > 1:
     from nsga_jax.batch import BatchRun, broadcast_members
-    from nsga_jax._simulate import _n_steps
+    from nsga_jax.validation import step_count as _n_steps
     n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
     cpu = time.process_time()
     run = BatchRun(broadcast_members(scene.model, batch), scene.scheme(), 0.0, np.tile(scene.q0, (batch, 1)),

@@ -21,7 +21,8 @@ import dataclasses
 import math
 import sys
 import time
-from collections.abc import Callable
+import warnings as _warnings
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import equinox as eqx
@@ -41,7 +42,21 @@ from .integrators.base import (
     unpack_outputs,
 )
 from .models.base import Model
-from .results import SUBPROBLEMS, ConfigError, ConvergenceError, Result
+from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
+from .results import SUBPROBLEMS, ConvergenceError, InvariantError, Result
+from .validation import (
+    check_initial_state,
+    check_memory,
+    check_model,
+    check_model_fields,
+    check_scheme,
+    choice,
+    integer,
+    require_instance,
+    state_vector,
+    step_count,
+    time_grid,
+)
 
 Observe = Callable[["Solution"], dict[str, np.ndarray]]
 
@@ -82,6 +97,7 @@ class Solution:
     compile_time: float
     observables: dict[str, np.ndarray] = field(default_factory=dict)
     totals: RunTotals | None = None
+    warnings: list[str] = field(default_factory=list)
 
     def __post_init__(self):
         if self.totals is None:
@@ -130,170 +146,67 @@ class Solution:
             "max_bilateral_violation_velocity": float(tot.max_bilateral_rate),
         }
         stats["iterations"]["linear_solves"] = {"mean": float(tot.solves_sum / n), "max": int(tot.solves_max)}
+        stats["energy"] = tot.energy_stats()
+        stats["warnings"] = list(self.warnings)
         return stats
 
 
-@dataclass
-class RunTotals:
-    """Statistics over every step of a run, added chunk by chunk, so that they
-    cover the steps a strided record leaves out: Newton iterations (sum and max
-    per sub-problem, and of their total, the linear solves per step), failed
-    step numbers and the first one's result code, the smallest gap [m] and the largest bilateral violations
-    (position [m], velocity [m/s])."""
-
-    n_steps: int = 0
-    iterations_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    iterations_max: np.ndarray = field(default_factory=lambda: np.zeros(3, int))
-    solves_sum: float = 0.0
-    solves_max: int = 0
-    failed: list[int] = field(default_factory=list)
-    first_result: int = 0
-    min_gap: float = math.inf
-    max_bilateral: float = 0.0
-    max_bilateral_rate: float = 0.0
-
-    def add(self, records: StepOutput, first_step: int) -> None:
-        """Add consecutive steps ``first_step, first_step + 1, ...`` (NumPy records)."""
-        it = np.asarray(records.iterations)
-        if not len(it):
-            return
-        self.n_steps += len(it)
-        self.iterations_sum += it.sum(axis=0)
-        self.iterations_max = np.maximum(self.iterations_max, it.max(axis=0))
-        solves = it.sum(axis=1)
-        self.solves_sum += float(solves.sum())
-        self.solves_max = max(self.solves_max, int(solves.max()))
-        bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
-        if bad.size and not self.failed:
-            self.first_result = int(np.asarray(records.result)[bad[0]])
-        self.failed.extend((first_step + bad).tolist())
-        gap = np.asarray(records.gap)
-        if gap.size:
-            self.min_gap = min(self.min_gap, float(gap.min()))
-        self.max_bilateral = max(self.max_bilateral, _absmax(records.bilateral))
-        self.max_bilateral_rate = max(self.max_bilateral_rate, _absmax(records.bilateral_rate))
-
-
-def _absmax(x) -> float:
-    x = np.asarray(x)
-    return float(np.abs(x).max()) if x.size else 0.0
-
-
 # ----------------------------------------------------------------- validation
+# (the checks live in :mod:`nsga_jax.validation`; these names are kept for the
+# modules and tests that call them from here)
 
-
-def _check_finite_positive(name: str, value, allow_zero: bool = False) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a real number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise ConfigError(f"{name} must be finite, got {x}")
-    if x < 0 or (x == 0 and not allow_zero):
-        rng = "[0, inf)" if allow_zero else "(0, inf)"
-        raise ConfigError(f"{name} must be in {rng}, got {x}")
-    return x
-
-
-def validate_scheme(scheme: AbstractScheme) -> None:
-    for name in ("tol_r", "tol_f"):
-        _check_finite_positive(name, getattr(scheme, name))
-    if not (isinstance(scheme.max_iter, int) and scheme.max_iter >= 1):
-        raise ConfigError(f"max_iter must be an integer >= 1, got {scheme.max_iter!r}")
-    for name, (value, lo, hi) in scheme.bounds().items():
-        x = float(value)
-        if not (math.isfinite(x) and lo <= x <= hi):
-            raise ConfigError(f"{name} must be in [{lo:g}, {hi:g}], got {x}")
-
-
-def validate_model(model: Model) -> None:
-    """Every float field finite, each named field in its :attr:`Model.ranges`,
-    and the model's own rules (:meth:`Model.invalid`), on concrete values."""
-    cls = type(model).__name__
-    for path, leaf in jax.tree_util.tree_leaves_with_path(model):
-        if eqx.is_inexact_array(leaf) and not isinstance(leaf, jax.core.Tracer):
-            if not np.all(np.isfinite(np.asarray(leaf))):
-                raise ConfigError(f"{cls}{jax.tree_util.keystr(path)} must be finite, got {np.asarray(leaf).tolist()}")
-    for name, rng in model.ranges.items():
-        value = getattr(model, name)
-        if isinstance(value, jax.core.Tracer):
-            continue
-        value = np.asarray(value)
-        if not rng.contains(value):
-            raise ConfigError(f"{cls}.{name} must be in {rng.text()}, got {value.tolist()}")
-    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model))
-    message = None if traced else model.invalid()
-    if message:
-        raise ConfigError(f"{cls}.{message}")
-
-
-def validate_initial_state(model: Model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9) -> None:
-    """Shapes, finiteness, bilateral constraints and non-penetration at t0."""
-    n = model.n_dof
-    for name, x in (("q0", q0), ("v0", v0)):
-        if x.shape != (n,):
-            raise ConfigError(f"{name} must have shape ({n},), got {x.shape}")
-        if not np.all(np.isfinite(x)):
-            bad = np.nonzero(~np.isfinite(x))[0]
-            raise ConfigError(f"{name} must be finite; non-finite entries at indices {bad.tolist()}")
-    scale = max(1.0, float(np.abs(q0).max(initial=0.0)))
-    if model.n_unilateral:
-        gap = np.asarray(model.unilateral(jnp.asarray(q0)))
-        if not np.all(np.isfinite(gap)):
-            raise ConfigError("the initial gaps are not finite")
-        bad = np.nonzero(gap < -tol * scale)[0]
-        if bad.size:
-            j = int(bad[0])
-            raise ConfigError(
-                f"initial penetration: gap {j} is {gap[j]:.6g} m at t0; every gap must be >= 0 "
-                "(move the body out of the obstacle)"
-            )
-    if model.n_bilateral:
-        g = np.asarray(model.bilateral(jnp.asarray(q0)))
-        bad = np.nonzero(~(np.abs(g) <= 1e3 * tol * scale))[0]
-        if bad.size:
-            j = int(bad[0])
-            raise ConfigError(
-                f"the initial position violates bilateral constraint {j} (g = {g[j]:.6g}); "
-                "start from a configuration that satisfies the joints"
-            )
+validate_model = check_model_fields
+validate_scheme = check_scheme
+validate_initial_state = check_initial_state
 
 
 def _n_steps(t0: float, t1: float, h: float) -> int:
-    n = (t1 - t0) / h
-    return max(1, int(math.floor(n + 1e-9)))
+    return step_count(t0, t1, h)
 
 
 # --------------------------------------------------------------------- the loop
 
 
-def _run_chunk(model, scheme, ops, carry, h, n_steps, stop_on_failure, length):
+def _run_chunk(model, scheme, ops, state, h, t_start, steps, stop_on_failure, length):
     """Up to ``length`` steps of ``scheme`` in one ``while_loop``, writing each
     step's record (packed in two vectors, :func:`pack_output`) into buffers of
     ``length`` records, returned as they are (the host unpacks them into
-    views, :func:`unpack_outputs`). The loop stops after step
-    ``n_steps`` (or after a failure when ``stop_on_failure``); the buffer's
-    unused tail is marked not done and dropped by the caller. The step count is
-    a traced value, so runs with another h (another number of steps) reuse the
-    compilation; under ``vmap`` a member that has finished keeps its state."""
-    state, k, stopped = carry
+    views, :func:`unpack_outputs`). The loop takes ``steps`` steps (a traced
+    count of at most ``length``: the host plans the chunks, so no counter on
+    the device ever passes a chunk's length), or stops after a failure when
+    ``stop_on_failure``; the buffer's unused tail is marked not done. Each
+    step starts at ``t_start + i h`` (the host computes ``t_start = t0 + k h``
+    in float64): time is never accumulated step by step. Runs with another h
+    or another number of steps reuse the compilation."""
     template = output_template(model, state.q.dtype)
     n_float, n_int = packed_sizes(template)
     buffer = (jnp.zeros((length, n_float), state.q.dtype), jnp.zeros((length, n_int), jnp.int32))
 
     def going(c):
-        i, _, k, stopped, _ = c
-        return (i < length) & (k < n_steps) & ~stopped
+        i, _, stopped, _ = c
+        return (i < steps) & ~stopped
 
     def body(c):
-        i, state, k, stopped, buffer = c
+        i, state, stopped, buffer = c
+        state = eqx.tree_at(lambda s: s.t, state, t_start + i.astype(h.dtype) * h)
         state, out = scheme.step(model, ops, state, h)
         buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 0) for b, x in zip(buffer, pack_output(out)))
         failed = out.result != Result.successful
-        return i + 1, state, k + 1, stopped | (failed & stop_on_failure), buffer
+        return i + 1, state, stopped | (failed & stop_on_failure), buffer
 
-    i, state, k, stopped, buffer = lax.while_loop(going, body, (jnp.zeros((), k.dtype), state, k, stopped, buffer))
-    return (state, k, stopped), (buffer, jnp.arange(length) < i)
+    i, state, _, buffer = lax.while_loop(going, body, (jnp.zeros((), jnp.int32), state, jnp.zeros((), bool), buffer))
+    return state, (buffer, jnp.arange(length) < i)
+
+
+def chunk_plan(n_steps: int, length: int, done: int = 0) -> Iterator[tuple[int, int]]:
+    """``(first, count)`` of each chunk of a run of ``n_steps`` steps after the
+    ``done`` already taken: the step number of the chunk's first step and its
+    number of steps (at most ``length``). Python integers: a run's step count
+    may pass 2**31, a chunk's never does."""
+    while done < n_steps:
+        count = min(length, n_steps - done)
+        yield done + 1, count
+        done += count
 
 
 def chunk_length(model: Model) -> int:
@@ -333,13 +246,16 @@ def simulate(
     observe: Observe | None = None,
     record_every: int = 1,
     dtype: str = "float64",
+    strict: bool = False,
+    tolerances: Tolerances | None = None,
 ) -> Solution:
     """Integrate ``model`` from t0 to t1 [s] with step h [s] by ``scheme``.
 
     Args:
         model: the semi-discrete system.
         scheme: the time integrator: ``DS(rho_inf=0.8)``, ``DSn()``, ``CS()`` or ``MJ(theta=0.5)``.
-        t0, t1, h: start and end time and step size [s]; N = floor((t1-t0)/h) steps.
+        t0, t1, h: start and end time and step size [s]; N = floor((t1-t0)/h)
+            steps, step k at t0 + k h (computed in float64, never accumulated).
         q0, v0: initial coordinates and velocities, shape (n,).
         throw: stop at the first step that fails (Newton cap or NaN/inf) and
             raise :class:`ConvergenceError`; with ``False`` keep going and
@@ -347,7 +263,7 @@ def simulate(
         chunk_size: steps per compiled chunk (default: :func:`chunk_length`, from
             the model's size; every chunk, and every run of the same model
             structure whatever its h or parameter values, reuses one compilation).
-        progress: print progress on stderr after each chunk.
+        progress: print progress on stderr (at most twice a second).
         on_chunk: called as ``on_chunk(k, partial)`` after chunk k with that
             chunk's records (a :class:`Solution` of the chunk alone).
         observe: computes named observables from the finished solution.
@@ -357,37 +273,57 @@ def simulate(
         dtype: ``"float64"`` (default) or ``"float32"``: the precision of the
             whole run (model, state, operators, records). In float32 the
             round-off of an assembled stiff force can exceed eq. 51's bound at
-            the default ``tol_r = 1e-5``; see README "Precision".
+            the default ``tol_r = 1e-5``.
+        strict: raise :class:`InvariantError` when the energy rises at an
+            impact step past ``tolerances.impact_energy`` (by default a
+            warning in ``Solution.warnings``).
+        tolerances: the monitors' bounds (:class:`~nsga_jax.monitors.Tolerances`).
 
-    Everything is validated before anything is traced.
+    Everything is validated before anything is traced: wrong Python types
+    raise :class:`TypeError`, bad values :class:`ConfigError`.
     """
-    validate_scheme(scheme)
-    validate_model(model)
-    h = _check_finite_positive("h", h)
-    t0 = float(t0)
-    t1 = float(t1)
-    if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
-        raise ConfigError(f"t1 must be finite and greater than t0, got t0={t0}, t1={t1}")
-    if h > t1 - t0:
-        raise ConfigError(f"h must be in (0, t1 - t0] = (0, {t1 - t0}], got {h}")
-    q0 = np.asarray(q0, dtype=float).reshape(-1) if np.ndim(q0) else np.asarray([q0], float)
-    v0 = np.asarray(v0, dtype=float).reshape(-1) if np.ndim(v0) else np.asarray([v0], float)
-    validate_initial_state(model, q0, v0)
-    for name, value in (("record_every", record_every), ("chunk_size", chunk_size or 1)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
-    if dtype not in DTYPES:
-        raise ConfigError(f"dtype must be one of {', '.join(map(repr, DTYPES))}, got {dtype!r}")
+    check_scheme(scheme)
+    check_model(model)
+    dtype = choice("dtype", dtype, DTYPES)
+    t0, t1, h, n_steps = time_grid(t0, t1, h, dtype)
+    q0 = state_vector("q0", q0, model.n_dof)
+    v0 = state_vector("v0", v0, model.n_dof)
+    check_initial_state(model, q0, v0)
+    record_every = integer("record_every", record_every, 1)
+    if chunk_size is not None:
+        chunk_size = integer("chunk_size", chunk_size, 1)
+    for name, value in (("throw", throw), ("progress", progress), ("strict", strict)):
+        require_instance(name, value, (bool, np.bool_), "True or False")
+    for name, value in (("on_chunk", on_chunk), ("observe", observe)):
+        if value is not None and not callable(value):
+            raise TypeError(f"{name} must be a function or None, got {type(value).__name__}")
+    tolerances = default_tolerances(dtype) if tolerances is None else tolerances
+    require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.monitors.Tolerances")
+    template = output_template(model, np.dtype(dtype))
+    check_memory(model.n_dof, np.dtype(dtype).itemsize, records=-(-n_steps // record_every) + 2,
+                 record_numbers=sum(packed_sizes(template)))
+    warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     with precision(dtype):
-        sol, error = _integrate(*_cast((model, scheme), dtype), t0, t1, h, q0.astype(dtype), v0.astype(dtype),
+        sol, error = _integrate(*_cast((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype), v0.astype(dtype),
                                 throw=throw, chunk_size=chunk_size, progress=progress, on_chunk=on_chunk,
                                 record_every=record_every, dtype=dtype)
+    sol.warnings = warnings + invariant_warnings(sol.totals, tolerances, h, t0)
+    for message in sol.warnings:
+        _warnings.warn(message, InvariantWarning, stacklevel=2)
     if observe is not None:  # in float64, from the (possibly float32) states
         sol.observables = {k: np.asarray(v) for k, v in observe(_float64_view(sol)).items()}
     if error is not None:
         error.solution = sol
         raise error
+    if strict and any(w.startswith(ENERGY_WARNING) for w in sol.warnings):
+        raise InvariantError(next(w for w in sol.warnings if w.startswith(ENERGY_WARNING)), sol)
     return sol
+
+
+class InvariantWarning(UserWarning):
+    """A monitor past its tolerance (penetration, bilateral violation, energy
+    created at an impact, a coarse step): the run went on, its result may be
+    wrong there."""
 
 
 DTYPES = ("float64", "float32")
@@ -436,14 +372,24 @@ def _float64_view(sol: Solution) -> Solution:
                                records=jax.tree_util.tree_map(up, sol.records))
 
 
-def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
+def _energy_of(model: Model):
+    """``(q, v) -> energies`` over a chunk's steps (jitted), or ``None``."""
+    if not model.has_energy:
+        return None
+
+    def energies(m, q, v):  # total energy [J] and kinetic energy 1/2 v·M v [J] after each step
+        return jax.vmap(lambda qi, vi: jnp.stack([m.energy(qi, vi), 0.5 * vi @ m.mass_product(qi, vi)]))(q, v)
+
+    return eqx.filter_jit(energies)
+
+
+def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
                record_every, dtype) -> tuple[Solution, ConvergenceError | None]:
     """The time loop of :func:`simulate` on validated arguments, in the precision
     already set by the caller; returns the solution and, when ``throw`` and a
     step failed, the error to raise."""
-    n_steps = _n_steps(t0, t1, h)
     length = chunk_size or chunk_length(model)
-    n_chunks = -(-n_steps // length)
+    real = np.dtype(dtype).type
 
     args0 = (model, scheme, jnp.asarray(t0), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h))
     tc = time.perf_counter()
@@ -454,46 +400,63 @@ def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress,
     ops, state = prep(*args0)
     jax.block_until_ready(state)
     wall = time.perf_counter() - tw
+    state0 = state
 
-    carry = (state, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
     template = output_template(model, state.q.dtype)
-    consts = (jnp.asarray(h), jnp.asarray(n_steps), jnp.asarray(throw))
+    h_arr, stop = jnp.asarray(h, dtype), jnp.asarray(throw)
+    shapes = (jnp.asarray(real(t0)), jnp.asarray(length, jnp.int32))
     tc = time.perf_counter()
-    run = _run_chunk_jit.lower(model, scheme, ops, carry, *consts, length).compile()
+    run = _run_chunk_jit.lower(model, scheme, ops, state, h_arr, *shapes, stop, length).compile()
+    energy_of = _energy_of(model)
+    if energy_of is not None:
+        q_shape = jnp.zeros((length, model.n_dof), state.q.dtype)
+        energy_of = energy_of.lower(model, q_shape, q_shape).compile()
     compile_time += time.perf_counter() - tc
 
-    chunks = []
-    totals = RunTotals()
+    chunks, numbers = [], []
+    totals = RunTotals(n_bilateral=model.n_bilateral)
+    if energy_of is not None:  # E(q0, v0), from the chunk's program (no other compilation)
+        rows = (jnp.broadcast_to(jnp.asarray(q0), (length, model.n_dof)),
+                jnp.broadcast_to(jnp.asarray(v0), (length, model.n_dof)))
+        totals.start(*np.asarray(energy_of(model, *rows)[0], float))
     first_failure = None
     steps_done = 0
-    for k in range(n_chunks):
+    shown = time.perf_counter()
+    for k, (first, count) in enumerate(chunk_plan(n_steps, length)):
         tw = time.perf_counter()
-        carry, (packed, done) = run(model, scheme, ops, carry, *consts, length)
-        jax.block_until_ready((carry, packed, done))
+        t_start = jnp.asarray(real(t0 + (first - 1) * h))
+        state, (packed, done) = run(model, scheme, ops, state, h_arr, t_start, jnp.asarray(count, jnp.int32), stop,
+                                    length)
+        jax.block_until_ready((state, packed, done))
         wall += time.perf_counter() - tw
         packed, done = jax.device_get((packed, done))
-        out = jax.tree_util.tree_map(lambda x: x[done], unpack_outputs(*packed, template))
+        full = unpack_outputs(*packed, template)
+        energies = None if energy_of is None else np.asarray(energy_of(model, full.q, full.v))[done]
+        out = jax.tree_util.tree_map(lambda x: x[done], full)
         if on_chunk is not None:
             on_chunk(k, out)
-        first = steps_done + 1
-        totals.add(out, first_step=first)
+        totals.add(out, first_step=first, energies=energies)
         steps_done += len(out.t)
         bad = np.nonzero(out.result != Result.successful)[0]
         if first_failure is None and bad.size:
             i = int(bad[0])
             first_failure = (first + i, out, i)
-        stop = throw and first_failure is not None
-        last = stop or k + 1 == n_chunks
-        chunks.append(_every(out, first, record_every, keep_last=last))
-        if progress:
-            print(f"\r  step {steps_done}/{n_steps} ({100.0 * steps_done / n_steps:5.1f} %)",
-                  end="" if not last else "\n", file=sys.stderr, flush=True)
-        if stop:
+        halt = throw and first_failure is not None
+        last = halt or steps_done >= n_steps
+        kept, kept_numbers = _every(out, first, record_every, keep_last=last)
+        chunks.append(kept)
+        numbers.append(kept_numbers)
+        if progress and (last or time.perf_counter() - shown > 0.5):
+            shown = time.perf_counter()
+            print(f"\r  step {steps_done}/{n_steps} ({100.0 * steps_done / n_steps:5.1f} %), "
+                  f"t = {t0 + steps_done * h:.6g} s", end="" if not last else "\n", file=sys.stderr, flush=True)
+        if halt:
             break
 
     records = _prepend_initial(model, chunks, t0, q0, v0)
+    ts = t0 + h * np.concatenate([[0], *numbers]).astype(np.float64)
     sol = Solution(
-        ts=np.asarray(records.t),
+        ts=ts,
         q=np.asarray(records.q),
         v=np.asarray(records.v),
         records=records,
@@ -515,12 +478,12 @@ def _integrate(model, scheme, t0, t1, h, q0, v0, *, throw, chunk_size, progress,
         j = int(np.argmax(out.residual[i] / np.maximum(out.tolerance[i], 1e-300)))
     err = ConvergenceError(
         step=step,
-        time=float(out.t[i]),
+        time=t0 + step * h,
         result=result,
         residual=float(out.residual[i, j]),
         tolerance=float(out.tolerance[i, j]),
         hint=(FLOAT32_HINT if dtype == "float32" and result in CAPPED
-              else nonfinite_origin(ops, state) if result in NONFINITE else ""),
+              else nonfinite_origin(ops, state0) if result in NONFINITE else ""),
     )
     return sol, err
 
@@ -564,16 +527,17 @@ def nonfinite_origin(ops: Operators, initial: StepState) -> str:
     return ("Before the first step, " + "; ".join(causes) + ".") if causes else ""
 
 
-def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> StepOutput:
+def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> tuple[StepOutput, np.ndarray]:
     """The records of the steps whose number is a multiple of ``k`` (and the
-    chunk's last step if ``keep_last``); the chunk starts at step ``first_step``."""
-    if k == 1:
-        return records
+    chunk's last step if ``keep_last``), with their step numbers; the chunk
+    starts at step ``first_step``."""
     numbers = first_step + np.arange(len(records.t))
+    if k == 1:
+        return records, numbers
     keep = numbers % k == 0
     if keep_last and len(keep):
         keep[-1] = True
-    return jax.tree_util.tree_map(lambda x: x[keep], records)
+    return jax.tree_util.tree_map(lambda x: x[keep], records), numbers[keep]
 
 
 def _prepend_initial(model: Model, chunks: list[StepOutput], t0, q0, v0) -> StepOutput:

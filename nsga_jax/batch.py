@@ -35,21 +35,27 @@ from ._simulate import (
     RunTotals,
     Solution,
     _cast,
-    _check_finite_positive,
     _float64_view,
-    _n_steps,
     _prepare_and_init_raw,
     _prepend_initial,
     chunk_length,
     precision,
-    validate_initial_state,
-    validate_model,
-    validate_scheme,
 )
 from .integrators.base import AbstractScheme, StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .integrators.linalg import bounded_lapack_batches
 from .models.base import Model
 from .results import ConfigError, Result
+from .validation import (
+    check_initial_state,
+    check_memory,
+    check_model,
+    check_scheme,
+    choice,
+    describe,
+    require_instance,
+    state_vector,
+    time_grid,
+)
 
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
@@ -112,19 +118,20 @@ def _on_devices(fn, mesh: Mesh | None):
     return jax.shard_map(fn, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
 
 
-def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
+def _run_members(model, scheme, ops, state, h, t_start, steps, length: int):
     """Up to ``length`` steps of every member (leading axis of every argument).
 
     The loop runs over steps with the step ``vmap``-ed inside it, not the other
     way round: its trip count and the record index are then shared by all
     members (a ``while_loop`` under ``vmap`` would carry, and select, the whole
-    record buffer at every step). A member past its ``n_steps`` keeps its state.
-    Records come out packed (:func:`pack_output`), as float and integer buffers
-    (B, length, fields), with the mask of steps taken (B, length); the host
-    unpacks them (:func:`unpack_outputs` on NumPy arrays makes views, where
-    unpacking here would copy every record once more).
+    record buffer at every step). Member b takes ``steps[b]`` steps (at most
+    ``length``, planned on the host: no device counter passes a chunk), each
+    starting at ``t_start[b] + i h[b]`` (never accumulated), and then keeps
+    its state. Records come out packed (:func:`pack_output`), as float and
+    integer buffers (B, length, fields), with the mask of steps taken (B,
+    length); the host unpacks them (:func:`unpack_outputs` on NumPy arrays
+    makes views, where unpacking here would copy every record once more).
     """
-    state, k, stopped = carry
     step = jax.vmap(lambda m, s, o, st, hh: s.step(m, o, st, hh))
     n_float, n_int = packed_sizes(output_template(model, state.q.dtype))
     B = len(h)
@@ -132,23 +139,24 @@ def _run_members(model, scheme, ops, carry, h, n_steps, length: int):
     mask = jnp.zeros((B, length), bool)
 
     def going(c):
-        i, _, k, stopped, _, _ = c
-        return (i < length) & jnp.any((k < n_steps) & ~stopped)
+        i, _, _, _ = c
+        return (i < length) & jnp.any(i < steps)
 
     def body(c):
-        i, state, k, stopped, buffer, mask = c
-        do = (k < n_steps) & ~stopped
+        i, state, buffer, mask = c
+        do = i < steps
+        state = eqx.tree_at(lambda s: s.t, state, t_start + i.astype(h.dtype) * h)
         new_state, out = step(model, scheme, ops, state, h)
         state = jax.tree_util.tree_map(
             lambda a, b: jnp.where(do.reshape(-1, *([1] * (a.ndim - 1))), a, b), new_state, state)
         packed = jax.vmap(pack_output)(out)
         buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 1) for b, x in zip(buffer, packed))
         mask = lax.dynamic_update_index_in_dim(mask, do, i, 1)
-        return i + 1, state, k + do.astype(k.dtype), stopped, buffer, mask
+        return i + 1, state, buffer, mask
 
-    init = (jnp.zeros((), jnp.int32), state, k, stopped, buffer, mask)
-    _, state, k, stopped, buffer, mask = lax.while_loop(going, body, init)
-    return (state, k, stopped), (buffer, mask)
+    init = (jnp.zeros((), jnp.int32), state, buffer, mask)
+    _, state, buffer, mask = lax.while_loop(going, body, init)
+    return state, (buffer, mask)
 
 
 @functools.cache
@@ -168,8 +176,7 @@ def _prepare_members(*members):
     then stay those of one member (see :func:`needs_bounded_lapack_batches`)."""
 
     def one(args):
-        ops, state = _prepare_and_init_raw(*args)
-        return ops, (state, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
+        return _prepare_and_init_raw(*args)
 
     return lax.map(one, members)
 
@@ -230,24 +237,39 @@ class BatchRun:
         jax.block_until_ready(self._carry)
         self.wall_time = time.perf_counter() - tw
         self._args = (args[0], args[1])
-        self._template = output_template(model, self._carry[0].q.dtype)
-        self._consts = _place((np.asarray(hs), np.asarray(n_steps, dtype=np.int32)), mesh)
+        self._template = output_template(model, self._carry.q.dtype)
+        self._hs = np.asarray(hs)
+        self._t0 = float(t0)
+        self._n_steps = np.asarray(n_steps, dtype=np.int64)
+        self._done = np.zeros(B, np.int64)
+        self._mesh = mesh
+        dtype = self._carry.q.dtype
         tc = time.perf_counter()
         with bounded_lapack_batches(bounded):
-            self._run = self._run.lower(*self._args, self._ops, self._carry, *self._consts).compile()
+            self._run = self._run.lower(*self._args, self._ops, self._carry, *self._chunk_args(dtype)).compile()
         self.compile_time += time.perf_counter() - tc
+
+    def _chunk_args(self, dtype):
+        """``(h, t_start, steps)`` of every member for the next chunk: each
+        member's steps left (at most a chunk's length) and the time it starts
+        from, ``t0 + done h`` in float64 (never accumulated on the device)."""
+        steps = np.minimum(self._n_steps - self._done, self.length).astype(np.int32)
+        t_start = (self._t0 + self._done * self._hs.astype(np.float64)).astype(dtype)
+        return _place((self._hs.astype(dtype), t_start, steps), self._mesh)
 
     @property
     def n_chunks(self) -> int:
         return -(-self.longest // self.length)
 
     def chunks(self) -> Iterator[tuple[StepOutput, np.ndarray]]:
+        dtype = self._carry.q.dtype
         for _ in range(self.n_chunks):
             tw = time.perf_counter()
-            self._carry, (packed, done) = self._run(*self._args, self._ops, self._carry, *self._consts)
+            self._carry, (packed, done) = self._run(*self._args, self._ops, self._carry, *self._chunk_args(dtype))
             jax.block_until_ready((self._carry, packed, done))
             self.wall_time += time.perf_counter() - tw
             packed, done = _to_host((packed, done))
+            self._done += done.sum(axis=1)
             yield unpack_outputs(*packed, self._template), done
 
 
@@ -291,21 +313,24 @@ def simulate_batch(
     splits the members over devices (:func:`member_mesh`; the number of step
     sizes must then be a multiple of the mesh size).
     """
-    validate_scheme(scheme)
-    validate_model(model)
-    hs = np.asarray([_check_finite_positive("h", h) for h in np.atleast_1d(hs)])
-    t0, t1 = float(t0), float(t1)
-    if not t1 > t0:
-        raise ConfigError(f"t1 must be greater than t0, got t0={t0}, t1={t1}")
-    if hs.max() > t1 - t0:
-        raise ConfigError(f"h must be in (0, t1 - t0] = (0, {t1 - t0}], got {hs.max()}")
-    q0 = np.asarray(q0, dtype=float).reshape(-1)
-    v0 = np.asarray(v0, dtype=float).reshape(-1)
-    validate_initial_state(model, q0, v0)
-    if dtype not in DTYPES:
-        raise ConfigError(f"dtype must be one of {', '.join(map(repr, DTYPES))}, got {dtype!r}")
+    check_scheme(scheme)
+    check_model(model)
+    dtype = choice("dtype", dtype, DTYPES)
+    hs = np.atleast_1d(np.asarray(hs, dtype=float)) if not isinstance(hs, (str, bytes)) else hs
+    if isinstance(hs, (str, bytes)) or hs.ndim != 1 or hs.size == 0:
+        raise TypeError(f"hs must be a non-empty sequence of step sizes, got {describe(hs)}")
+    grids = [time_grid(t0, t1, h, dtype) for h in hs]
+    t0, t1 = grids[0][0], grids[0][1]
+    q0 = state_vector("q0", q0, model.n_dof)
+    v0 = state_vector("v0", v0, model.n_dof)
+    check_initial_state(model, q0, v0)
+    if mesh is not None:
+        require_instance("mesh", mesh, Mesh, "a jax.sharding.Mesh (nsga_jax.batch.member_mesh)")
+    n_steps = np.array([g[3] for g in grids])
+    template = output_template(model, np.dtype(dtype))
+    check_memory(model.n_dof, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()) + 1,
+                 record_numbers=sum(packed_sizes(template)), what="each run's model")
     B = len(hs)
-    n_steps = np.array([_n_steps(t0, t1, h) for h in hs])
     with precision(dtype):
         model_c, scheme_c = _cast((model, scheme), dtype)
         run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),

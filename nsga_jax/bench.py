@@ -26,12 +26,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._simulate import _cast, _n_steps, precision
+from ._simulate import _cast, precision
 from .batch import BatchRun, broadcast_members
 from .compilation_cache import compilation_cache
 from .metrics import relative_l1_error
 from .results import ConfigError
 from .scenes.base import REGISTRY, Scene, load_scene
+from .validation import step_count
 
 CASES: dict[str, dict] = {
     "bouncing_ball": {"h": 1e-3},
@@ -110,7 +111,7 @@ def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
     [s] estimated from a probe of its first steps, and (compile time, best
     wall time, compile time from the persistent cache), or ``None`` when the
     estimate exceeds ``max_seconds`` (the batch is then not run in full)."""
-    n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
+    n = step_count(0.0, scene.solver["t_end"], scene.solver["h"])
     with precision(dtype):
         model, scheme = _cast((scene.model, scene.scheme()), dtype)
         members = broadcast_members(model, batch)

@@ -73,3 +73,13 @@ class ConvergenceError(RuntimeError):
             + (f"{hint} " if hint else "")
             + "Pass throw=False (CLI: --no-throw) to keep going and mark failed steps."
         )
+
+
+class InvariantError(RuntimeError):
+    """A run that a ``strict`` caller asked to fail when an invariant broke
+    (energy created at an impact); carries the run's ``solution``."""
+
+    def __init__(self, message: str, solution=None):
+        self.solution = solution
+        super().__init__(message + ". (strict: energy growth at impacts is an error; without strict it is a "
+                         "warning in the run's summary)")

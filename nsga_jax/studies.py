@@ -21,12 +21,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ._simulate import Solution, _n_steps, simulate  # noqa: E402
+from ._simulate import Solution, simulate  # noqa: E402
 from .batch import simulate_batch  # noqa: E402
 from .metrics import observed_order, relative_l1_error  # noqa: E402
 from .results import ConfigError  # noqa: E402
 from .scenes.base import Scene, load_scene  # noqa: E402
 from .tables import write_csv  # noqa: E402
+from .validation import step_count  # noqa: E402
 
 MODES = ("grouped", "padded", "separate")
 
@@ -50,10 +51,10 @@ def run_step_sizes(scene: Scene, hs, mode: str = "grouped", group_ratio: float =
     elif mode == "padded":
         groups = [list(range(len(hs)))]
     else:
-        order = sorted(range(len(hs)), key=lambda i: _n_steps(0.0, T, hs[i]))
+        order = sorted(range(len(hs)), key=lambda i: step_count(0.0, T, hs[i]))
         groups = []
         for i in order:
-            if groups and _n_steps(0.0, T, hs[i]) <= group_ratio * _n_steps(0.0, T, hs[groups[-1][0]]):
+            if groups and step_count(0.0, T, hs[i]) <= group_ratio * step_count(0.0, T, hs[groups[-1][0]]):
                 groups[-1].append(i)
             else:
                 groups.append([i])

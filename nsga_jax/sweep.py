@@ -33,13 +33,14 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._simulate import RunTotals, Solution, _cast, _float64_view, _n_steps, precision
+from ._simulate import RunTotals, Solution, _cast, _float64_view, precision
 from .batch import BatchRun, member_mesh, member_solution, stack_models
 from .distributed import agree
 from .metrics import relative_l1_error
 from .results import ConfigError
 from .scenes.base import Scene, load_scene
 from .tables import read_csv, write_csv
+from .validation import step_count
 
 MEMORY_BUDGET = 2**25
 """Recorded numbers a batch keeps in memory (256 MiB in float64); the default
@@ -164,7 +165,7 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
     first = scenes[0]
     t_end = first.solver["t_end"]
     hs = np.asarray([s.solver["h"] for s in scenes])
-    n_steps = np.asarray([_n_steps(0.0, t_end, h) for h in hs])
+    n_steps = np.asarray([step_count(0.0, t_end, h) for h in hs])
     every = np.maximum(1, -(-n_steps // max_records))  # per member: at most max_records kept
     with precision(first.solver["dtype"]):
         dtype = first.solver["dtype"]

@@ -117,9 +117,9 @@ def time_grid(t0: Any, t1: Any, h: Any, dtype: str = "float64", *, t1_name: str 
     :data:`TIME_RESOLUTION` units in the last place), at most
     :data:`MAX_STEPS` steps.
     """
-    t0 = real("t0", t0, unit="s")
-    t1 = real(t1_name, t1, unit="s")
-    h = real("h", h, 0.0, lo_open=True, unit="s")
+    t0 = real("t0", t0)
+    t1 = real(t1_name, t1)
+    h = real("h", h, 0.0, lo_open=True)
     if t1 <= t0:
         raise ConfigError(f"{t1_name} must be finite and greater than t0, got t0={t0}, {t1_name}={t1}")
     if h > t1 - t0:
@@ -181,3 +181,104 @@ def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 
 
 __all__ = ["MAX_STEPS", "check_memory", "choice", "describe", "integer", "real", "require_instance",
            "step_count", "time_grid"]
+
+
+# ----------------------------------------------------------- models, schemes
+
+
+def _concrete_leaves(tree):
+    """(path, leaf) of every floating-point leaf that holds concrete values."""
+    import equinox as eqx
+    import jax
+
+    return [(p, x) for p, x in jax.tree_util.tree_leaves_with_path(tree)
+            if eqx.is_inexact_array(x) and not isinstance(x, jax.core.Tracer)]
+
+
+def check_model_fields(model) -> None:
+    """Every float field finite, each named field in its ``ranges``, and the
+    model's own rules (``invalid()``), on concrete values (traced fields are
+    checked where they were made)."""
+    import jax
+
+    cls = type(model).__name__
+    for path, leaf in _concrete_leaves(model):
+        values = np.asarray(leaf)
+        if not np.all(np.isfinite(values)):
+            raise ConfigError(f"{cls}{jax.tree_util.keystr(path)} must be finite, got {values.tolist()}")
+    for name, rng in model.ranges.items():
+        value = getattr(model, name)
+        if isinstance(value, jax.core.Tracer):
+            continue
+        value = np.asarray(value)
+        if not rng.contains(value):
+            raise ConfigError(f"{cls}.{name} must be in {rng.text()}, got {value.tolist()}")
+    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model))
+    message = None if traced else model.invalid()
+    if message:
+        raise ConfigError(f"{cls}.{message}")
+
+
+def check_scheme(scheme) -> None:
+    """A scheme instance with tolerances in (0, inf), an integer iteration cap
+    >= 1 and its own settings in their ranges."""
+    from .integrators.base import AbstractScheme
+
+    require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
+    for name in ("tol_r", "tol_f"):
+        real(name, np.asarray(getattr(scheme, name)).item() if np.ndim(getattr(scheme, name)) == 0
+             else getattr(scheme, name), 0.0, lo_open=True)
+    integer("max_iter", scheme.max_iter, 1)
+    for name, (value, lo, hi) in scheme.bounds().items():
+        x = float(value)
+        if not (math.isfinite(x) and lo <= x <= hi):
+            raise ConfigError(f"{name} must be in [{lo:g}, {hi:g}], got {x}")
+
+
+def state_vector(name: str, value: Any, n: int) -> np.ndarray:
+    """``q0`` or ``v0`` as a float64 vector of shape (n,): numbers only
+    (:class:`TypeError` otherwise), finite, of the model's size."""
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} must be an array of {n} numbers, got {describe(value)}")
+    try:
+        x = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be an array of {n} numbers, got {describe(value)}") from None
+    x = x.reshape(-1) if x.ndim else x.reshape(1)
+    if x.shape != (n,):
+        raise ConfigError(f"{name} must have shape ({n},), got {np.shape(value)}")
+    if not np.all(np.isfinite(x)):
+        bad = np.nonzero(~np.isfinite(x))[0]
+        raise ConfigError(f"{name} must be finite; non-finite entries at indices {bad.tolist()}")
+    return x
+
+
+def check_initial_state(model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9) -> None:
+    """Bilateral constraints satisfied and no penetration at t0."""
+    import jax.numpy as jnp
+
+    scale = max(1.0, float(np.abs(q0).max(initial=0.0)))
+    if model.n_unilateral:
+        gap = np.asarray(model.unilateral(jnp.asarray(q0)))
+        if not np.all(np.isfinite(gap)):
+            raise ConfigError("the initial gaps are not finite")
+        bad = np.nonzero(gap < -tol * scale)[0]
+        if bad.size:
+            j = int(bad[0])
+            raise ConfigError(f"initial penetration: gap {j} is {gap[j]:.6g} m at t0; every gap must be >= 0 "
+                              "(move the body out of the obstacle)")
+    if model.n_bilateral:
+        g = np.asarray(model.bilateral(jnp.asarray(q0)))
+        bad = np.nonzero(~(np.abs(g) <= 1e3 * tol * scale))[0]
+        if bad.size:
+            j = int(bad[0])
+            raise ConfigError(f"the initial position violates bilateral constraint {j} (g = {g[j]:.6g}); "
+                              "start from a configuration that satisfies the joints")
+
+
+def check_model(model) -> None:
+    """A model instance whose fields pass :func:`check_model_fields`."""
+    from .models.base import Model
+
+    require_instance("model", model, Model, "a model instance (a subclass of nsga_jax.Model)")
+    check_model_fields(model)

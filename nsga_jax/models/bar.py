@@ -11,7 +11,7 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
-from .base import POSITIVE, UNIT_INTERVAL, Model
+from .base import POSITIVE, UNIT_INTERVAL, Model, count_rule
 
 
 class ElasticBar(Model):
@@ -32,6 +32,9 @@ class ElasticBar(Model):
     e: Scalar = eqx.field(converter=as_float)
 
     ranges = {"E": POSITIVE, "rho": POSITIVE, "area": POSITIVE, "length": POSITIVE, "e": UNIT_INTERVAL}
+
+    def invalid(self) -> str | None:
+        return count_rule("n_elements", self.n_elements)
     n_elements: int = eqx.field(static=True)
     lumped: bool = eqx.field(static=True, default=False)
 

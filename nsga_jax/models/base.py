@@ -53,6 +53,22 @@ class Range(NamedTuple):
 
 
 POSITIVE = Range(0.0, math.inf, lo_open=True)
+
+
+def side_rule(side) -> str | None:
+    """``side`` must be exactly +1 or -1 (which side of a wall is admissible):
+    any other value scales or removes the gap."""
+    values = np.asarray(side)
+    if not np.all(np.isin(values, (-1.0, 1.0))):
+        return f"side must be +1 or -1 (the admissible side of the wall), got {values.tolist()}"
+    return None
+
+
+def count_rule(name: str, value, lo: int = 1) -> str | None:
+    """A static count (elements, nodes) must be an integer >= lo."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+        return f"{name} must be an integer >= {lo}, got {value!r}"
+    return None
 UNIT_INTERVAL = Range(0.0, 1.0)
 
 
@@ -73,6 +89,14 @@ class Model(eqx.Module):
     """Allowed range of named float fields (every element of an array field),
     checked with concrete values by :func:`~nsga_jax.simulate` before tracing;
     every float field must be finite in any case."""
+
+    def __check_init__(self):
+        """Refuse, at construction, what the model's physics cannot mean
+        (:func:`~nsga_jax.validation.check_model_fields`): non-finite fields,
+        fields out of their ranges, broken :meth:`invalid` rules."""
+        from ..validation import check_model_fields
+
+        check_model_fields(self)
 
     def invalid(self) -> str | None:
         """A rule on concrete values that ``ranges`` cannot state (e.g. a positive
@@ -168,6 +192,22 @@ class Model(eqx.Module):
     def restitution(self) -> ConstraintVector:
         """Newton restitution coefficients e, shape (nu,), each in [0, 1]."""
         return jnp.zeros((self.n_unilateral,))
+
+    # ---------------------------------------------------------- monitors
+    def energy(self, q: Vector, v: Vector) -> Scalar:
+        """Total mechanical energy [J] (kinetic + potential + strain), where the
+        model defines one: runs then monitor it (largest rise, rise at impacts)."""
+        raise NotImplementedError
+
+    @property
+    def has_energy(self) -> bool:
+        """Whether the model defines :meth:`energy`."""
+        return type(self).energy is not Model.energy
+
+    def angular_speed(self, q: Vector, v: Vector) -> float | None:
+        """The largest angular speed [rad/s] of the model's bodies at (q, v), for
+        the coarse-step warning before a run; ``None`` where nothing turns."""
+        return None
 
     # ------------------------------------------------ derived (not overridden)
     def constraints(self, q: Vector) -> ConstraintVector:

@@ -12,7 +12,7 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.beam2d import beam_energy, beam_internal_force, beam_mass
-from .base import POSITIVE, UNIT_INTERVAL, Model, Range
+from .base import POSITIVE, UNIT_INTERVAL, Model, Range, count_rule, side_rule
 
 
 class PlanarBeam(Model):
@@ -48,7 +48,10 @@ class PlanarBeam(Model):
     tip_load: jax.Array = eqx.field(converter=as_float)
 
     ranges = {"EA": POSITIVE, "GAs": POSITIVE, "EI": POSITIVE, "length": POSITIVE, "rhoA": POSITIVE,
-              "rhoI": Range(0.0), "side": Range(-1.0, 1.0), "e": UNIT_INTERVAL}
+              "rhoI": Range(0.0), "e": UNIT_INTERVAL}
+
+    def invalid(self) -> str | None:
+        return count_rule("n_elements", self.n_elements) or side_rule(self.side)
     n_elements: int = eqx.field(static=True)
     pinned: bool = eqx.field(static=True, default=True)
     clamped: bool = eqx.field(static=True, default=False)
@@ -126,6 +129,10 @@ class PlanarBeam(Model):
     @property
     def restitution(self) -> jax.Array:
         return self.e[None] if self.wall else jnp.zeros((0,))
+
+    def angular_speed(self, q: Vector, v: Vector) -> float:
+        """The largest cross-section angular speed |θ̇| [rad/s] over the nodes."""
+        return float(jnp.max(jnp.abs(v[2::3])))
 
     def strain_energy(self, q: Vector) -> Scalar:
         return jnp.sum(jax.vmap(beam_energy)(self.elements.gather(q), self.elements.params))

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
-from .base import POSITIVE, UNIT_INTERVAL, Model, Range
+from .base import POSITIVE, UNIT_INTERVAL, Model, side_rule
 
 
 class BouncingBall(Model):
@@ -71,7 +71,10 @@ class RigidPendulum(Model):
     side: Scalar = eqx.field(converter=as_float)
     e: Scalar = eqx.field(converter=as_float)
 
-    ranges = {"m": POSITIVE, "length": POSITIVE, "side": Range(-1.0, 1.0), "e": UNIT_INTERVAL}
+    ranges = {"m": POSITIVE, "length": POSITIVE, "e": UNIT_INTERVAL}
+
+    def invalid(self) -> str | None:
+        return side_rule(self.side)
 
     n_dof = 2
     n_bilateral = 1
@@ -102,6 +105,10 @@ class RigidPendulum(Model):
     @property
     def restitution(self) -> jax.Array:
         return self.e[None]
+
+    def angular_speed(self, q: Vector, v: Vector) -> float:
+        """|v| / l [rad/s]: the rod's angular speed."""
+        return float(jnp.linalg.norm(v) / self.length)
 
     def energy(self, q: Vector, v: Vector) -> Scalar:
         """Kinetic + potential energy [J] (zero potential at the pivot height)."""

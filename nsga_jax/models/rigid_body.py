@@ -98,6 +98,10 @@ class RigidBody(Model):
         """Velocity (3,) of the material point X: x is linear in q, so ẋ = x(q̇) - x(0)."""
         return v[:3] + frame(v) @ X
 
+    def angular_speed(self, q: Vector, v: Vector) -> float:
+        """|ω| [rad/s]."""
+        return float(jnp.linalg.norm(angular_velocity(q, v)))
+
     def energy(self, q: Vector, v: Vector) -> Scalar:
         """Kinetic + gravitational potential energy [J]."""
         return 0.5 * v @ self.mass(q) @ v + self.mass_ * self.gravity * q[2]

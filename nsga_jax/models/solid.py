@@ -41,6 +41,20 @@ class HexSolid(Model):
 
     ranges = {"E": POSITIVE, "nu": Range(-1.0, 0.5, lo_open=True, hi_open=True), "rho": POSITIVE,
               "e": UNIT_INTERVAL}
+    def invalid(self) -> str | None:
+        nodes = self.reference_nodes.shape[-2] if self.reference_nodes.ndim == 2 else 0
+        conn, contact = self.connectivity.array, self.contact_nodes.array
+        if self.reference_nodes.ndim != 2 or self.reference_nodes.shape[-1] != 3 or nodes == 0:
+            return f"reference_nodes must have shape (N, 3) with N >= 1, got {tuple(self.reference_nodes.shape)}"
+        if conn.ndim != 2 or conn.shape[1] != 8 or conn.shape[0] == 0:
+            return f"connectivity must have shape (E, 8) with E >= 1, got {conn.shape}"
+        for name, idx in (("connectivity", conn), ("contact_nodes", contact)):
+            if idx.size and (idx.min() < 0 or idx.max() >= nodes):
+                return f"{name} must index nodes in [0, {nodes - 1}], got indices in [{idx.min()}, {idx.max()}]"
+        if np.any(np.asarray(self.volumes) <= 0):
+            return "every element must have a positive volume (check the node order of the connectivity)"
+        return None
+
     connectivity: StaticIndex = eqx.field(static=True)
     contact_nodes: StaticIndex = eqx.field(static=True)
     shape_gradients: jax.Array

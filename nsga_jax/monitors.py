@@ -1,0 +1,202 @@
+"""Invariant monitors: what every run reports beyond its trajectory.
+
+:class:`RunTotals` adds up, chunk by chunk on the host, statistics over every
+step of a run (also those a strided record leaves out): Newton iterations per
+sub-problem, failed steps, the largest penetration and bilateral violations,
+and, for a model with an ``energy(q, v)``, the energy at the start and the
+end, the largest rise over one step and the largest rise over one step with a
+contact impulse (an *impact step*). :func:`invariant_warnings` compares them
+with :class:`Tolerances` and names each one exceeded; energy created at an
+impact (the scheme's law with e ≤ 1 never creates it) is the warning that
+``strict`` runs turn into a failure.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .results import Result
+
+ENERGY_WARNING = "energy rise at an impact"
+"""The start of the warning :func:`invariant_warnings` gives for energy
+created at an impact step (what ``strict`` turns into a failure)."""
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Bounds past which a run's summary warns.
+
+    Attributes:
+        penetration: largest allowed penetration of a unilateral gap [m].
+        bilateral: largest allowed bilateral violation |g^B| [m].
+        bilateral_rate: largest allowed velocity-level violation |g_q^B v| [m/s].
+        impact_energy: largest allowed energy rise over an impact step, as a
+            fraction of the run's energy scale (the largest |E| or kinetic
+            energy seen).
+        rotation_per_step: largest rotation of a body over one step [rad]
+            before a run warns that the step is coarse for the motion.
+    """
+
+    penetration: float = 1e-6
+    bilateral: float = 1e-6
+    bilateral_rate: float = 1e-4
+    impact_energy: float = 1e-2
+    rotation_per_step: float = 0.2
+
+
+def default_tolerances(dtype: str = "float64") -> Tolerances:
+    """The default bounds; a float32 run's constraint bounds are 100 times
+    looser (its round-off is 2**29 times a float64 run's)."""
+    if dtype == "float32":
+        return Tolerances(penetration=1e-4, bilateral=1e-4, bilateral_rate=1e-2)
+    return Tolerances()
+
+
+@dataclass
+class RunTotals:
+    """Statistics over every step of a run, added chunk by chunk, so that they
+    cover the steps a strided record leaves out: Newton iterations (sum and max
+    per sub-problem, and of their total, the linear solves per step), failed
+    step numbers and the first one's result code, the smallest gap [m], the
+    largest bilateral violations (position [m], velocity [m/s]) and the
+    energy monitors [J] (when energies are given)."""
+
+    n_bilateral: int = 0
+    n_steps: int = 0
+    iterations_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    iterations_max: np.ndarray = field(default_factory=lambda: np.zeros(3, int))
+    solves_sum: float = 0.0
+    solves_max: int = 0
+    failed: list[int] = field(default_factory=list)
+    first_result: int = 0
+    min_gap: float = math.inf
+    max_bilateral: float = 0.0
+    max_bilateral_rate: float = 0.0
+    energy_initial: float = math.nan
+    energy_last: float = math.nan
+    energy_scale: float = 0.0
+    max_energy_rise: float = -math.inf
+    max_impact_energy_rise: float = -math.inf
+    max_impact_energy_rise_step: int = 0
+    impact_steps: int = 0
+
+    def start(self, energy0: float | None, kinetic0: float = 0.0) -> None:
+        """The energy and the kinetic energy at t0 [J] (``None``: the model has
+        no energy)."""
+        if energy0 is not None:
+            self.energy_initial = self.energy_last = float(energy0)
+            self.energy_scale = max(abs(float(energy0)), float(kinetic0))
+
+    def add(self, records, first_step: int, energies: np.ndarray | None = None) -> None:
+        """Add consecutive steps ``first_step, first_step + 1, ...`` (NumPy
+        records), with the energy and kinetic energy after each step, shape
+        (steps, 2), where the model has an energy."""
+        it = np.asarray(records.iterations)
+        if not len(it):
+            return
+        self.n_steps += len(it)
+        self.iterations_sum += it.sum(axis=0)
+        self.iterations_max = np.maximum(self.iterations_max, it.max(axis=0))
+        solves = it.sum(axis=1)
+        self.solves_sum += float(solves.sum())
+        self.solves_max = max(self.solves_max, int(solves.max()))
+        result = np.asarray(records.result)
+        bad = np.nonzero(result != Result.successful)[0]
+        if bad.size and not self.failed:
+            self.first_result = int(result[bad[0]])
+        self.failed.extend((first_step + bad).tolist())
+        gap = np.asarray(records.gap)
+        if gap.size:
+            self.min_gap = min(self.min_gap, float(gap.min()))
+        self.max_bilateral = max(self.max_bilateral, _absmax(records.bilateral))
+        self.max_bilateral_rate = max(self.max_bilateral_rate, _absmax(records.bilateral_rate))
+        if energies is not None and math.isfinite(self.energy_last):
+            self._add_energies(np.asarray(energies, float), np.asarray(records.impulse), first_step)
+
+    def _add_energies(self, energies: np.ndarray, impulse: np.ndarray, first_step: int) -> None:
+        energies, kinetic = energies[:, 0], energies[:, 1]
+        finite = np.isfinite(energies)
+        if not finite.any():
+            return
+        before = np.concatenate([[self.energy_last], energies[:-1]])
+        rise = energies - before
+        impact = np.any(impulse[:, self.n_bilateral:] != 0.0, axis=1) if impulse.ndim == 2 else np.zeros(len(rise),
+                                                                                                          bool)
+        ok = finite & np.isfinite(before)
+        self.energy_scale = max(self.energy_scale, float(np.abs(energies[finite]).max()),
+                                float(np.nan_to_num(kinetic[finite]).max()))
+        if ok.any():
+            self.max_energy_rise = max(self.max_energy_rise, float(rise[ok].max()))
+        hits = ok & impact
+        self.impact_steps += int(impact.sum())
+        if hits.any():
+            i = int(np.argmax(np.where(hits, rise, -np.inf)))
+            if rise[i] > self.max_impact_energy_rise:
+                self.max_impact_energy_rise = float(rise[i])
+                self.max_impact_energy_rise_step = first_step + i
+        self.energy_last = float(energies[finite][-1]) if finite[-1] else self.energy_last
+
+    @property
+    def has_energy(self) -> bool:
+        return math.isfinite(self.energy_initial)
+
+    def energy_stats(self) -> dict | None:
+        """The energy monitors [J], or ``None`` for a model without an energy."""
+        if not self.has_energy:
+            return None
+
+        def number(x):
+            return float(x) if math.isfinite(x) else None
+
+        return {"initial": self.energy_initial, "final": self.energy_last,
+                "change": self.energy_last - self.energy_initial,
+                "max_step_rise": number(self.max_energy_rise),
+                "impact_steps": self.impact_steps,
+                "max_impact_rise": number(self.max_impact_energy_rise),
+                "max_impact_rise_step": self.max_impact_energy_rise_step if self.impact_steps else None}
+
+
+def _absmax(x) -> float:
+    x = np.asarray(x)
+    return float(np.abs(x).max()) if x.size else 0.0
+
+
+def invariant_warnings(totals: RunTotals, tol: Tolerances, h: float, t0: float = 0.0) -> list[str]:
+    """A named warning for each monitor past its tolerance."""
+    out = []
+    if totals.min_gap < -tol.penetration:
+        out.append(f"penetration: a gap reached {totals.min_gap:.3e} m (tolerance {tol.penetration:g} m)")
+    if totals.max_bilateral > tol.bilateral:
+        out.append(f"bilateral violation: |g| reached {totals.max_bilateral:.3e} m "
+                   f"(tolerance {tol.bilateral:g} m)")
+    if totals.max_bilateral_rate > tol.bilateral_rate:
+        out.append(f"bilateral rate violation: |g_q v| reached {totals.max_bilateral_rate:.3e} m/s "
+                   f"(tolerance {tol.bilateral_rate:g} m/s)")
+    if totals.has_energy and totals.impact_steps:
+        rise = totals.max_impact_energy_rise
+        scale = max(totals.energy_scale, 1e-300)
+        if math.isfinite(rise) and rise > tol.impact_energy * scale:
+            step = totals.max_impact_energy_rise_step
+            out.append(f"{ENERGY_WARNING}: the energy rose by {rise:.4g} J ({100 * rise / scale:.3g} % of "
+                       f"{scale:.4g} J) in step {step} (t = {t0 + step * h:.6g} s), where a contact impulse "
+                       f"acted; the step is too coarse for the motion there (tolerance "
+                       f"{100 * tol.impact_energy:g} %)")
+    return out
+
+
+def coarse_step_warning(rate: float | None, h: float, tol: Tolerances) -> str | None:
+    """A warning when a body turns more than ``tol.rotation_per_step`` in one
+    step at its initial angular speed ``rate`` [rad/s] (``None``: no bodies
+    that turn)."""
+    if rate is None or not math.isfinite(rate) or rate * h <= tol.rotation_per_step:
+        return None
+    return (f"coarse step: a body turns {rate * h:.3g} rad per step at its initial angular speed "
+            f"({rate:.4g} rad/s, h = {h:g} s; more than {tol.rotation_per_step:g} rad); contacts may be "
+            f"met at the wrong point: reduce h below {tol.rotation_per_step / rate:.2g} s")
+
+
+__all__ = ["ENERGY_WARNING", "RunTotals", "Tolerances", "coarse_step_warning", "default_tolerances",
+           "invariant_warnings"]
