@@ -35,13 +35,16 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._custom_types import Scalar
-from ._simulate import validate_model
 from .events import initially_active, with_impact_time_sensitivity
 from .integrators.base import AbstractScheme, StepOutput, StepState
 from .models.base import Model
 from .results import ConfigError, Result
+from .validation import check_model_fields, check_scheme, describe, integer, require_instance
 
 ADJOINTS = ("discrete", "event")
+MAX_SCAN_STEPS = 2**31 - 1
+"""The most steps of one differentiable trajectory (its scan counts steps in int32;
+every step's record is kept, so longer runs would not fit in memory anyway)."""
 STEP_RESIDUALS_BYTES = 2**28  # per chunk: above this, each step is checkpointed as well
 
 
@@ -119,13 +122,17 @@ def trajectory(
     Returns:
         A :class:`Trajectory`.
     """
-    for name, value in (("n_steps", n_steps), ("checkpoint_every", checkpoint_every or 1)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
+    check_scheme(scheme)
+    integer("n_steps", n_steps, 1, MAX_SCAN_STEPS)
+    if checkpoint_every is not None:
+        integer("checkpoint_every", checkpoint_every, 1)
     if adjoint not in ADJOINTS:
         raise ConfigError(f"adjoint must be one of {', '.join(map(repr, ADJOINTS))}, got {adjoint!r}")
-    validate_model(model)  # concrete fields only: traced ones are checked where they were made
+    require_instance("model", model, Model, "a model instance (a subclass of nsga_jax.Model)")
+    check_model_fields(model)  # concrete fields only: traced ones are checked where they were made
     for name, x in (("q0", q0), ("v0", v0)):
+        if isinstance(x, (str, bytes)) or x is None:
+            raise TypeError(f"{name} must be an array of {model.n_dof} numbers, got {describe(x)}")
         if jnp.shape(x) != (model.n_dof,):
             raise ConfigError(f"{name} must have shape ({model.n_dof},), got {jnp.shape(x)}")
     scheme = dataclasses.replace(scheme, differentiable=True)
@@ -152,6 +159,7 @@ def trajectory(
 
     def one_step(carry, k):  # carry: the state, and with adjoint="event" the contacts' last active set
         state, was_active = carry
+        state = eqx.tree_at(lambda s: s.t, state, t0 + k.astype(dtype) * h)  # t0 + k h, never accumulated
         new, out = scheme.step(model, ops, state, h)
         if event:
             new, out = with_impact_time_sensitivity(model, ops, state, new, out, h, was_active)

@@ -88,7 +88,7 @@ def real(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf, *, 
 def integer(name: str, value: Any, lo: int = 1, hi: int | None = None) -> int:
     """``value`` as a Python int in [lo, hi], else :class:`ConfigError`
     (floats with a fractional part, booleans and strings are refused)."""
-    allowed = f"an integer >= {lo}" if hi is None else f"an integer in [{lo}, {hi}]"
+    allowed = f"an integer >= {lo}" + ("" if hi is None else f" and <= {hi}")
     ok = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
     if not ok or value < lo or (hi is not None and value > hi):
         raise ConfigError(f"{name} must be {allowed}, got {value!r}")
@@ -221,17 +221,22 @@ def check_model_fields(model) -> None:
 
 def check_scheme(scheme) -> None:
     """A scheme instance with tolerances in (0, inf), an integer iteration cap
-    >= 1 and its own settings in their ranges."""
+    >= 1 and its own settings in their ranges (concrete values only: traced
+    settings are checked where they were made)."""
+    import jax
+
     from .integrators.base import AbstractScheme
 
     require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
-    for name in ("tol_r", "tol_f"):
-        real(name, np.asarray(getattr(scheme, name)).item() if np.ndim(getattr(scheme, name)) == 0
-             else getattr(scheme, name), 0.0, lo_open=True)
     integer("max_iter", scheme.max_iter, 1)
-    for name, (value, lo, hi) in scheme.bounds().items():
-        x = float(value)
-        if not (math.isfinite(x) and lo <= x <= hi):
+    settings = {"tol_r": (scheme.tol_r, 0.0, math.inf), "tol_f": (scheme.tol_f, 0.0, math.inf), **scheme.bounds()}
+    for name, (value, lo, hi) in settings.items():
+        if isinstance(value, jax.core.Tracer):
+            continue
+        x = float(np.asarray(value))
+        if name in ("tol_r", "tol_f"):
+            real(name, x, 0.0, lo_open=True)
+        elif not (math.isfinite(x) and lo <= x <= hi):
             raise ConfigError(f"{name} must be in [{lo:g}, {hi:g}], got {x}")
 
 
