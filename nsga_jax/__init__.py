@@ -1,41 +1,74 @@
 """nsga_jax: nonsmooth multibody dynamics with the decoupled nonsmooth generalized-α scheme.
 
-Importing the package turns on float64 (``jax_enable_x64``): the schemes'
-Newton tolerances and constraint checks are meant for double precision.
+Importing the package is cheap: the numerical modules (and JAX) load when a
+name that needs them is first used (``nsga_jax.simulate``, ``nsga_jax.DS``,
+...), so that the command line answers ``--help`` and input errors at once.
 
-It also turns off XLA's concurrency-optimised CPU scheduler (unless the user
-set ``XLA_FLAGS`` otherwise): with jaxlib 0.10 a program that vmaps dense
-solves over step sizes deadlocked on its second execution without this flag
-(seen with ``nsga_jax.batch``). The flag only takes effect if nsga_jax is
-imported before JAX runs its first computation.
+Side effects, both documented in docs/python-api.md:
+
+- **float64.** When the numerical modules load, they turn on JAX's
+  ``jax_enable_x64``: the schemes' Newton tolerances and constraint checks are
+  meant for double precision. Set the environment variable
+  ``NSGA_JAX_X64=0`` before the first use to leave JAX's setting alone (runs
+  then need ``dtype="float32"``, or x64 enabled by the caller).
+- **XLA flags.** ``import nsga_jax`` adds
+  ``--xla_cpu_enable_concurrency_optimized_scheduler=false`` to ``XLA_FLAGS``
+  (unless the user set that flag): with jaxlib 0.10 a program that vmaps
+  dense solves over step sizes deadlocked on its second execution without
+  it. It only takes effect if nsga_jax is imported before JAX runs its first
+  computation; set the flag yourself in ``XLA_FLAGS`` to choose otherwise.
 """
 
+import importlib
 import os
 
 _FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler"
 if _FLAG not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + f" {_FLAG}=false").strip()
 
-import jax  # noqa: E402
-
-jax.config.update("jax_enable_x64", True)
-
-from . import scenes  # noqa: E402
-from ._simulate import Solution, simulate  # noqa: E402
-from .integrators.base import AbstractScheme, StepOutput, StepState  # noqa: E402
-from .integrators.coefficients import GenAlphaCoefficients  # noqa: E402
-from .integrators.cs import CS  # noqa: E402
-from .integrators.ds import DS, DSn  # noqa: E402
-from .integrators.mj import MJ  # noqa: E402
-from .models import BouncingBall, ElasticBar, Model, RigidPendulum  # noqa: E402
-from .results import ConfigError, ConvergenceError, Result  # noqa: E402
-from .scenes import load_scene  # noqa: E402
-from .trajectory import Trajectory, trajectory  # noqa: E402
-
-SCHEMES = {"ds": DS, "dsn": DSn, "cs": CS, "mj": MJ}
-"""Scheme classes by their command-line names."""
+from .results import ConfigError, ConvergenceError, InvariantError, Result  # noqa: E402  (no JAX)
 
 __version__ = "0.1.0"
+
+_LAZY = {
+    "Solution": "._simulate",
+    "simulate": "._simulate",
+    "AbstractScheme": ".integrators.base",
+    "StepOutput": ".integrators.base",
+    "StepState": ".integrators.base",
+    "GenAlphaCoefficients": ".integrators.coefficients",
+    "CS": ".integrators.cs",
+    "DS": ".integrators.ds",
+    "DSn": ".integrators.ds",
+    "MJ": ".integrators.mj",
+    "Model": ".models",
+    "BouncingBall": ".models",
+    "RigidPendulum": ".models",
+    "ElasticBar": ".models",
+    "load_scene": ".scenes",
+    "Trajectory": ".trajectory",
+    "trajectory": ".trajectory",
+    "Tolerances": ".monitors",
+}
+_MODULES = ("scenes",)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    elif name in _MODULES:
+        value = importlib.import_module(f".{name}", __name__)
+    elif name == "SCHEMES":
+        value = {"ds": __getattr__("DS"), "dsn": __getattr__("DSn"), "cs": __getattr__("CS"), "mj": __getattr__("MJ")}
+    else:
+        raise AttributeError(f"module 'nsga_jax' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_LAZY) + list(_MODULES) + ["SCHEMES"])
+
 
 __all__ = [
     "AbstractScheme",
@@ -54,10 +87,12 @@ __all__ = [
     "Result",
     "ConfigError",
     "ConvergenceError",
+    "InvariantError",
     "Solution",
     "simulate",
     "scenes",
     "load_scene",
+    "Tolerances",
     "Trajectory",
     "trajectory",
 ]

@@ -3,22 +3,41 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
-from .compilation_cache import ENV, default_cache_dir, use_compilation_cache
-from .output import chunk_writer, summary, write_run
-from .results import ConfigError, ConvergenceError
-from .scenes import REGISTRY, load_scene, parse_override
+from .results import ConfigError, ConvergenceError, InvariantError
+
+CACHE_ENV = "NSGA_JAX_CACHE"
+EXIT_FAILED = 1
+"""A run that failed (a step, or a strict invariant) or a fit that did not converge."""
+EXIT_INPUT = 2
+"""Bad input: the message names the field, the value and what is allowed."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C: what was computed is kept on disk, and the message says where."""
+
+BLAS_THREADS = "1"
+"""``OPENBLAS_NUM_THREADS`` of the command line (unless the user set it): the
+small LAPACK calls of a step gain nothing from OpenBLAS's threads and lose
+much when the cores are busy (docs/performance.md, "BLAS threads")."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``error: ...``, exit 2) instead of a
+    usage block."""
+
+    def error(self, message: str):
+        raise ConfigError(f"{self.prog}: {message} (see {self.prog} --help)")
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="nsga-jax", description=__doc__)
+    p = _Parser(prog="nsga-jax", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     cached = argparse.ArgumentParser(add_help=False)
     cached.add_argument("--no-cache", action="store_true",
                         help="compile afresh and keep nothing on disk (default: compiled programs are kept in "
-                             f"${ENV} or ~/.cache/nsga_jax/xla, and a later run of the same scene structure, "
+                             f"${CACHE_ENV} or ~/.cache/nsga_jax/xla, and a later run of the same scene structure, "
                              "with any h and parameter values, loads them instead of compiling)")
 
     run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=[cached])
@@ -35,7 +54,12 @@ def _parser() -> argparse.ArgumentParser:
                           "DIR/steps/ and into the statistics (flat memory for long runs)")
     run.add_argument("--no-throw", action="store_true",
                      help="keep going past an unconverged step and mark it in the results")
-    run.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>)")
+    run.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>, or nsga_out/<scene>_2, ... "
+                                              "when it holds an earlier run); a folder holding an earlier run is "
+                                              "refused unless --overwrite")
+    run.add_argument("--overwrite", action="store_true", help="replace the earlier run in --out")
+    run.add_argument("--strict", action="store_true",
+                     help="fail (exit 1) when the energy rises at an impact past its tolerance (default: a warning)")
     run.add_argument("--chunk", type=int, default=None, help="steps per compiled chunk")
     run.add_argument("--quiet", action="store_true", help="no progress output")
 
@@ -121,26 +145,49 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _use_cache(args) -> None:
+    """The persistent compilation cache, set up once the command's input is
+    validated (it loads JAX)."""
+    from .compilation_cache import default_cache_dir, use_compilation_cache
+
+    use_compilation_cache(None if args.no_cache else default_cache_dir())
+
+
 def _run(args) -> int:
+    from .folders import claim_run_folder, free_folder
+    from .scenes import load_scene, parse_override
+    from .validation import integer
+
     overrides = dict(parse_override(s) for s in args.set)
     for key, value in (("h", args.h), ("t_end", args.t_end), ("rho_inf", args.rho_inf), ("scheme", args.scheme),
                        ("dtype", args.dtype), ("record_every", args.record_every)):
         if value is not None:
             overrides[key] = value
+    if args.chunk is not None:
+        integer("--chunk", args.chunk, 1)
     scene = load_scene(args.scene, overrides)
-    out = args.out or Path("nsga_out") / scene.name
-    if args.chunk is not None and args.chunk < 1:
-        raise ConfigError(f"--chunk must be an integer >= 1, got {args.chunk}")
     s = scene.solver
+    out = args.out if args.out is not None else free_folder(Path("nsga_out") / scene.name)
+    claim_run_folder(out, {"command": "run", "scene": str(args.scene), "parameters": scene.parameters,
+                           "solver": scene.solver}, overwrite=args.overwrite)
+    _use_cache(args)
+    from .output import chunk_writer, summary, write_run
+
     if not args.quiet:
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
-              f"rho_inf = {s['rho_inf']:g}, {s['dtype']}", file=sys.stderr)
+              f"rho_inf = {s['rho_inf']:g}, {s['dtype']}; output in {out}", file=sys.stderr)
     failure = None
+    writer = chunk_writer(out)
     try:
-        sol = scene.run(throw=not args.no_throw, progress=not args.quiet,
-                        chunk_size=args.chunk, on_chunk=chunk_writer(out))
-    except ConvergenceError as err:
+        sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, on_chunk=writer,
+                        strict=args.strict)
+    except (ConvergenceError, InvariantError) as err:
         failure, sol = err, err.solution
+    except KeyboardInterrupt:
+        kept = sorted((Path(out) / "partial").glob("chunk_*.npz"))
+        print(f"\ninterrupted: {len(kept)} finished chunk(s) of steps kept in {Path(out) / 'partial'} "
+              "(nsga_jax.output.load_chunks reads them)", file=sys.stderr)
+        return EXIT_INTERRUPTED
     info = summary(sol, scene.name, s["scheme"],
                    {"parameters": scene.parameters, "solver": scene.solver,
                     "error": str(failure) if failure else None})
@@ -152,12 +199,24 @@ def _run(args) -> int:
           f"smooth {it['smooth']['mean']:.2f}/{it['smooth']['max']}, "
           f"position {it['position']['mean']:.2f}/{it['position']['max']}, "
           f"velocity {it['velocity']['mean']:.2f}/{it['velocity']['max']}; "
-          f"failed steps {st['failed_steps']}; max penetration {st['max_penetration']:.2e} m")
+          f"failed steps {st['failed_steps']}; max penetration {st['max_penetration']:.2e} m; "
+          f"bilateral violation {st['max_bilateral_violation_position']:.2e} m"
+          + _energy_text(st["energy"]))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
+    for warning in st["warnings"]:
+        print(f"warning: {warning}", file=sys.stderr)
     if failure is not None:
         print(f"error: {failure}", file=sys.stderr)
-        return 1
+        return EXIT_FAILED
     return 0
+
+
+def _energy_text(energy: dict | None) -> str:
+    if energy is None:
+        return ""
+    rise = energy["max_impact_rise"]
+    at_impacts = "" if rise is None else f", largest change over an impact step {rise:+.3g} J"
+    return f"; energy {energy['initial']:.6g} -> {energy['final']:.6g} J{at_impacts}"
 
 
 def _step_sizes(text: str) -> list[float]:
@@ -169,7 +228,8 @@ def _step_sizes(text: str) -> list[float]:
 
 
 def _convergence(args) -> int:
-    from .studies import make_reference, study, write_study
+    from .folders import writable_folder
+    from .scenes import load_scene, parse_override
 
     overrides = dict(parse_override(s) for s in args.set)
     if args.t_end is not None:
@@ -186,7 +246,10 @@ def _convergence(args) -> int:
     unknown = [k for k in observables if k not in scene.spec.observables]
     if unknown:
         raise ConfigError(f"unknown observable {unknown[0]!r}; {scene.name} has {', '.join(scene.spec.observables)}")
-    out = args.out or Path("nsga_out") / f"{scene.name}_convergence"
+    out = writable_folder(args.out or Path("nsga_out") / f"{scene.name}_convergence")
+    _use_cache(args)
+    from .studies import make_reference, study, write_study
+
     if args.ref:
         reference = make_reference(args.scene, overrides, "exact")
     else:
@@ -208,6 +271,8 @@ def _convergence(args) -> int:
 
 def _assignments(items: list[str]) -> dict:
     """``["a=1,b=2", "c=3"]`` -> ``{"a": 1.0, "b": 2.0, "c": 3.0}``."""
+    from .scenes import parse_override
+
     parts = [part for item in items for part in item.split(",") if part.strip()]
     for part in parts:
         if "=" not in part:
@@ -216,7 +281,9 @@ def _assignments(items: list[str]) -> dict:
 
 
 def _identify(args) -> int:
-    from .identify import Data, identify, synthetic_data, write_identification
+    from .folders import writable_folder
+    from .scenes import load_scene, parse_override
+    from .validation import integer, real
 
     overrides = dict(parse_override(s) for s in args.set)
     for key, value in (("h", args.h), ("t_end", args.t_end)):
@@ -228,13 +295,18 @@ def _identify(args) -> int:
         extra = [k for k in values if k not in names]
         if extra:
             raise ConfigError(f"{label} sets {extra[0]!r}, which is not in --params ({', '.join(names)})")
-    if args.every < 1:
-        raise ConfigError(f"--every must be an integer >= 1, got {args.every}")
-    if not 0.0 <= args.noise < 1.0:
+    integer("--every", args.every, 1)
+    integer("--max-steps", args.max_steps, 1)
+    integer("--seed", args.seed, 0)
+    real("--learning-rate", args.learning_rate, 0.0, lo_open=True)
+    if not (0.0 <= args.noise < 1.0):
         raise ConfigError(f"--noise must be in [0, 1) (a fraction of the RMS), got {args.noise}")
     scene = load_scene(args.scene, {**overrides, **true})  # validates before anything runs
     load_scene(args.scene, {**overrides, **initial})
-    out = args.out or Path("nsga_out") / f"{scene.name}_identify"
+    out = writable_folder(args.out or Path("nsga_out") / f"{scene.name}_identify")
+    _use_cache(args)
+    from .identify import Data, identify, synthetic_data, write_identification
+
     if args.synthetic:
         observables = args.observables.split(",") if args.observables else [scene.spec.observables[0]]
         true = {k: scene.parameters[k] for k in names}
@@ -262,16 +334,26 @@ def _identify(args) -> int:
     print(f"{result.iterations} iterations, loss {result.losses[0]:.3e} -> {result.losses[-1]:.3e}, "
           f"{result.wall_time_s:.2f} s (compile {result.compile_time_s:.1f} s)")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
+    if not result.converged:
+        print(f"error: the fit did not converge: {result.stop_message}", file=sys.stderr)
+        return EXIT_FAILED
     return 0
 
 
 def _sweep(args) -> int:
-    import jax
-
+    from .folders import writable_folder
+    from .scenes import parse_override
     from .sweep import parse_grid, sweep
+    from .validation import integer
 
+    for name, value, lo in (("--batch-size", args.batch_size, 1), ("--devices", args.devices, 1),
+                            ("--max-records", args.max_records, 1), ("--num-processes", args.num_processes, 1),
+                            ("--process-id", args.process_id, 0)):
+        if value is not None:
+            integer(name, value, lo)
     grid = parse_grid(args.grid)
     hs = None if args.h is None else _step_sizes(args.h)
+    _use_cache(args)
     hosts = (args.coordinator, args.num_processes, args.process_id)
     if any(x is not None for x in hosts):
         if any(x is None for x in hosts):
@@ -281,13 +363,21 @@ def _sweep(args) -> int:
         from .distributed import initialize
 
         initialize(*hosts)  # before anything asks JAX for its devices
+    import jax
+
     devices = jax.devices() if args.devices is None else jax.devices()[: args.devices]
     if args.devices is not None and not 1 <= args.devices <= len(jax.devices()):
         raise ConfigError(f"--devices must be in [1, {len(jax.devices())}], got {args.devices}")
-    out = args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep"
-    result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
-                   batch_size=args.batch_size, devices=devices, max_records=args.max_records,
-                   progress=not args.quiet)
+    out = writable_folder(args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep")
+    try:
+        result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
+                       batch_size=args.batch_size, devices=devices, max_records=args.max_records,
+                       progress=not args.quiet)
+    except KeyboardInterrupt:
+        kept = sorted((Path(out) / "batches").glob("batch_*.csv"))
+        print(f"\ninterrupted: {len(kept)} finished batch(es) kept in {Path(out) / 'batches'}; the same command "
+              "resumes the sweep from there", file=sys.stderr)
+        return EXIT_INTERRUPTED
     print(f"{len(result.rows)} runs on {len(devices)} device(s); compile {result.compile_time:.1f} s, "
           f"runs {result.wall_time:.2f} s (this session's batches)")
     for row in result.failed:
@@ -303,12 +393,14 @@ def _sweep(args) -> int:
 
 def _bench(args) -> int:
     from .bench import bench, markdown
+    from .folders import writable_folder
 
     scenes = None if args.scenes is None else args.scenes.split(",")
     try:
         batches = [int(b) for b in args.batch.split(",")]
     except ValueError:
         raise ConfigError(f"--batch expects comma-separated integers, got {args.batch!r}") from None
+    writable_folder(args.out)
     rows = bench(scenes, batches, args.dtype.split(","), scheme=args.scheme, repeats=args.repeats,
                  max_steps=args.max_steps, max_seconds=args.max_seconds, out=args.out)
     table = markdown(rows)
@@ -319,6 +411,8 @@ def _bench(args) -> int:
 
 
 def _scenes() -> int:
+    from .scenes import REGISTRY
+
     for name, spec in sorted(REGISTRY.items()):
         print(f"{name}: {spec.description}")
         for key, p in spec.parameters.items():
@@ -328,32 +422,39 @@ def _scenes() -> int:
     return 0
 
 
+def _config(args) -> int:
+    from .scenes import REGISTRY
+
+    if args.scene not in REGISTRY:
+        raise ConfigError(f"unknown scene {args.scene!r}; built-in scenes: {', '.join(sorted(REGISTRY))}")
+    print(REGISTRY[args.scene].default_toml(), end="")
+    return 0
+
+
+COMMANDS = {"run": _run, "convergence": _convergence, "identify": _identify, "sweep": _sweep, "bench": _bench,
+            "scenes": lambda args: _scenes(), "config": _config}
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    if hasattr(args, "no_cache"):
-        use_compilation_cache(None if args.no_cache else default_cache_dir())
+    """Run one command; returns the exit code: 0, :data:`EXIT_FAILED`,
+    :data:`EXIT_INPUT` (``error: ...`` on one line, no traceback) or
+    :data:`EXIT_INTERRUPTED`. Errors inside nsga_jax itself keep their
+    traceback."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)  # effective where numpy is not loaded yet
     try:
-        if args.command == "run":
-            return _run(args)
-        if args.command == "convergence":
-            return _convergence(args)
-        if args.command == "identify":
-            return _identify(args)
-        if args.command == "sweep":
-            return _sweep(args)
-        if args.command == "bench":
-            return _bench(args)
-        if args.command == "scenes":
-            return _scenes()
-        if args.command == "config":
-            if args.scene not in REGISTRY:
-                raise ConfigError(f"unknown scene {args.scene!r}; built-in scenes: {', '.join(sorted(REGISTRY))}")
-            print(REGISTRY[args.scene].default_toml(), end="")
-            return 0
+        args = _parser().parse_args(argv)
+        return COMMANDS[args.command](args)
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)
-        return 2
-    return 0
+        return EXIT_INPUT
+    except TypeError as err:  # a wrong type reaching the Python API from the command line is bad input too
+        if "must be" not in str(err):
+            raise
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print("\ninterrupted (Ctrl-C)", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -10,19 +10,17 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import jax.numpy as jnp
 import numpy as np
 
-from .._simulate import Solution, simulate
-from ..integrators.base import AbstractScheme
-from ..integrators.cs import CS
-from ..integrators.ds import DS, DSn
-from ..integrators.mj import MJ
-from ..models.base import Model
 from ..results import ConfigError
 from .params import SOLVER_PARAMS, Param, check_all, check_solver
+
+if TYPE_CHECKING:  # the numerical modules load (with JAX) only when a scene is built or run
+    from .._simulate import Solution
+    from ..integrators.base import AbstractScheme
+    from ..models.base import Model
 
 
 @dataclass
@@ -61,6 +59,8 @@ class Scene:
         """Simulate from t = 0 to ``t_end`` with step ``h`` in the configured
         ``dtype``, keeping every ``record_every``-th step; keyword arguments go
         to :func:`~nsga_jax.simulate` (and take precedence)."""
+        from .._simulate import simulate
+
         kwargs = {"dtype": self.solver["dtype"], "record_every": self.solver["record_every"], **kwargs}
         return simulate(
             self.model, self.scheme(), 0.0, self.solver["t_end"], self.solver["h"],
@@ -70,6 +70,10 @@ class Scene:
 
 def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
     """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter)."""
+    from ..integrators.cs import CS
+    from ..integrators.ds import DS, DSn
+    from ..integrators.mj import MJ
+
     common = dict(tol_r=solver["tol_r"], tol_f=solver["tol_f"], max_iter=solver["max_iter"])
     name = solver["scheme"]
     if name == "mj":
@@ -78,7 +82,7 @@ def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
     return cls(rho_inf=solver["rho_inf"], **common)
 
 
-Make = Callable[[dict[str, Any], dict[str, Any]], tuple[Model, Any, Any, Callable]]
+Make = Callable[[dict[str, Any], dict[str, Any]], tuple["Model", Any, Any, Callable]]
 """``make(p, concrete) -> (model, q0, v0, observe)``: JAX-traceable in the
 float parameters ``p`` (so gradients flow from them); structural decisions
 (sizes, indices, sides) read the validated Python values ``concrete``."""
@@ -321,6 +325,8 @@ def parametrize(name_or_path: str | Path, overrides: dict[str, Any] | None = Non
         if k not in floats:
             raise ConfigError(f"{k!r} is not a float parameter of {spec.name}; differentiable: {', '.join(floats)}")
     concrete = dict(scene.parameters)
+    import jax.numpy as jnp
+
     params = {k: jnp.asarray(concrete[k], dtype=float) for k in names}
 
     def build(p: dict[str, Any]):

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import jax.numpy as jnp
-
 from ..exact import bouncing_ball
-from ..models.point_mass import BouncingBall
 from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
 
@@ -20,6 +17,10 @@ PARAMETERS = {
 
 
 def make(p, concrete):
+    import jax.numpy as jnp
+
+    from ..models.point_mass import BouncingBall
+
     model = BouncingBall(m=p["mass"], gravity=p["gravity"], e=p["e"])
     q0 = jnp.reshape(jnp.asarray(p["height"], float), (1,))
     v0 = jnp.reshape(jnp.asarray(p["velocity"], float), (1,))

@@ -2,13 +2,8 @@
 
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ..assembly import StaticIndex
-from ..elements.hex8 import structured_hex_mesh
-from ..models.solid import HexSolid
 from ..results import ConfigError
 from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
@@ -33,6 +28,13 @@ def check(p):
 
 
 def make(p, concrete):
+    import jax
+    import jax.numpy as jnp
+
+    from ..assembly import StaticIndex
+    from ..elements.hex8 import structured_hex_mesh
+    from ..models.solid import HexSolid
+
     n = concrete["divisions"]
     unit, conn = structured_hex_mesh((1.0, 1.0, 1.0), (n, n, n), (-0.5, -0.5, -0.5))
     bottom = np.nonzero(np.isclose(unit[:, 2], -0.5))[0]

@@ -5,10 +5,6 @@ from __future__ import annotations
 
 import math
 
-import jax
-import jax.numpy as jnp
-
-from ..models.beam2d import PlanarBeam
 from ..results import ConfigError
 from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
@@ -42,6 +38,11 @@ def check(p):
 
 
 def make(p, concrete):
+    import jax
+    import jax.numpy as jnp
+
+    from ..models.beam2d import PlanarBeam
+
     A, I = p["area"], p["inertia"]
     G = p["E"] / (2.0 * (1.0 + p["nu"]))
     side = math.copysign(1.0, _offset(concrete))

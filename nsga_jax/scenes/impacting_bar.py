@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import jax.numpy as jnp
-
-from ..models.bar import ElasticBar
 from ..results import ConfigError
 from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
@@ -35,6 +32,10 @@ def check(p):
 
 
 def make(p, concrete):
+    import jax.numpy as jnp
+
+    from ..models.bar import ElasticBar
+
     ne = concrete["n_elements"]
     node045 = _node045(concrete)
     model = ElasticBar(E=p["E"], rho=p["rho"], area=p["area"], length=p["length"], gap0=p["gap"],

@@ -5,11 +5,8 @@ The rigid body is in natural coordinates (12 coordinates, constant mass matrix,
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
 
-from ..elements.rigid_body import box_inertia, box_vertices, natural_velocities
-from ..models.rigid_body import RigidBody
 from ..results import ConfigError
 from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
@@ -38,6 +35,8 @@ PARAMETERS = {
 
 def rotation(roll, pitch):
     """R = R_y(pitch) R_x(roll), shape (3, 3)."""
+    import jax.numpy as jnp
+
     cr, sr, cp, sp = jnp.cos(roll), jnp.sin(roll), jnp.cos(pitch), jnp.sin(pitch)
     one, zero = jnp.ones_like(cr), jnp.zeros_like(cr)
     Rx = jnp.array([[one, zero, zero], [zero, cr, -sr], [zero, sr, cr]])
@@ -46,19 +45,29 @@ def rotation(roll, pitch):
 
 
 def _sides(p):
+    import jax.numpy as jnp
+
     return jnp.stack([jnp.asarray(p[k], float) for k in ("lx", "ly", "lz")])
 
 
 def check(p):
     if p["floor"] == "on":
-        vertices = np.asarray(box_vertices(_sides(p)))
-        R0 = np.asarray(rotation(p["roll"], p["pitch"]))
+        signs = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], float) * 2 - 1
+        vertices = 0.5 * signs * np.array([p["lx"], p["ly"], p["lz"]])  # box_vertices, in NumPy
+        cr, sr, cp, sp = np.cos(p["roll"]), np.sin(p["roll"]), np.cos(p["pitch"]), np.sin(p["pitch"])
+        R0 = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]]) @ np.array(
+            [[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])  # rotation(roll, pitch), in NumPy
         lowest = (p["z0"] + vertices @ R0.T[:, 2]).min()
         if lowest < 0.0:
             raise ConfigError(f"initial penetration: the lowest vertex is at z = {lowest:.6g} m; raise z0")
 
 
 def make(p, concrete):
+    import jax.numpy as jnp
+
+    from ..elements.rigid_body import box_inertia, box_vertices, natural_velocities
+    from ..models.rigid_body import RigidBody
+
     sides = _sides(p)
     vertices = box_vertices(sides)
     R0 = rotation(p["roll"], p["pitch"])

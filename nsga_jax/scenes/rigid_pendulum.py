@@ -5,9 +5,6 @@ from __future__ import annotations
 
 import math
 
-import jax.numpy as jnp
-
-from ..models.point_mass import RigidPendulum
 from ..results import ConfigError
 from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
@@ -37,6 +34,10 @@ def check(p):
 
 
 def make(p, concrete):
+    import jax.numpy as jnp
+
+    from ..models.point_mass import RigidPendulum
+
     length, th, om = p["length"], p["angle"], p["omega"]
     q0 = jnp.stack([length * jnp.sin(th), -length * jnp.cos(th)])
     v0 = length * om * jnp.stack([jnp.cos(th), jnp.sin(th)])

@@ -1,0 +1,76 @@
+"""Output folders that cannot mix runs.
+
+A run writes into a folder it has *claimed*: the folder is created (or is
+empty, or holds none of a run's files), and ``run.json`` in it names the
+invocation. A folder that holds an earlier run's files is refused unless the
+caller asks to replace them (``overwrite``: the earlier files are deleted
+before anything is written), so that chunks of two runs never end up side by
+side. Paths that cannot hold a folder (an existing file, a folder without
+write permission) are refused by name before anything is compiled.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+
+from .results import ConfigError
+
+RUN_FILES = ("run.json", "summary.json", "trajectory.npz", "observables.png", "iterations.png", "partial", "steps")
+"""What a run writes into its folder (``run.json`` first, at the claim)."""
+
+
+def writable_folder(path: Path, what: str = "output folder") -> Path:
+    """``path`` as a folder this process can write into (created with its
+    parents), or :class:`ConfigError` naming why not."""
+    path = Path(path).expanduser()
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"{what} {str(path)!r} is an existing file, not a folder; choose another path")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".nsga_jax_write_test_{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as err:
+        raise ConfigError(f"{what} {str(path)!r} cannot be written: {err.strerror or err}") from None
+    return path
+
+
+def earlier_run_files(path: Path) -> list[str]:
+    """The names of a run's files that ``path`` already holds."""
+    return [name for name in RUN_FILES if (path / name).exists()]
+
+
+def claim_run_folder(path: Path, description: dict, *, overwrite: bool = False) -> Path:
+    """Claim ``path`` for one run: refuse it when it holds an earlier run's
+    files (unless ``overwrite``, which deletes them first), then write
+    ``run.json`` with ``description`` and the time of the claim."""
+    path = writable_folder(path)
+    found = earlier_run_files(path)
+    if found and not overwrite:
+        raise ConfigError(f"output folder {str(path)!r} holds an earlier run ({', '.join(found)}); a run never "
+                          "writes beside another run's files: choose another --out, or pass --overwrite to "
+                          "replace that run")
+    for name in found:
+        target = path / name
+        shutil.rmtree(target) if target.is_dir() else target.unlink()
+    record = {**description, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid()}
+    (path / "run.json").write_text(json.dumps(record, indent=2, default=str) + "\n")
+    return path
+
+
+def free_folder(base: Path) -> Path:
+    """``base`` if it holds no earlier run, else the first of ``base_2``,
+    ``base_3``, ... that holds none (the default output folder of a run)."""
+    base = Path(base)
+    candidate, k = base, 1
+    while candidate.exists() and (not candidate.is_dir() or earlier_run_files(candidate)):
+        k += 1
+        candidate = base.with_name(f"{base.name}_{k}")
+    return candidate
+
+
+__all__ = ["RUN_FILES", "claim_run_folder", "earlier_run_files", "free_folder", "writable_folder"]
