@@ -99,11 +99,33 @@ class Identification:
     fitted: dict[str, np.ndarray] = field(default_factory=dict)
     initial_fit: dict[str, np.ndarray] = field(default_factory=dict)
     gradient_norm: float = math.nan
+    at_bounds: list[str] = field(default_factory=list)
+
+    STOPS = {
+        "gradient": "the projected gradient fell below gtol",
+        "loss": "an iteration lowered the loss by less than ftol of its value",
+        "max_steps": "the iteration cap (max_steps) was reached",
+        "line search": "no step along the search direction lowered the loss (failed line search)",
+        "bound": "it stopped on a bound of the parameters' range where the gradient is zero: the loss is flat "
+                 "there, which is no fit (start closer to the data, or fit fewer parameters)",
+    }
+
+    @property
+    def converged(self) -> bool:
+        """Whether the fit ended at a stationary point of the loss inside the
+        parameters' ranges (or against a bound the gradient pushes into)."""
+        return self.stop in ("gradient", "loss")
+
+    @property
+    def stop_message(self) -> str:
+        where = f" ({', '.join(self.at_bounds)} at a bound)" if self.at_bounds else ""
+        return f"stopped because {self.STOPS.get(self.stop, self.stop)}{where}"
 
     def summary(self) -> dict[str, Any]:
         out = {"parameters": self.names, "initial": self.initial, "recovered": self.recovered,
                "iterations": self.iterations, "evaluations": self.evaluations,
-               "stopped_by": self.stop, "initial_loss": self.losses[0], "final_loss": self.losses[-1],
+               "stopped_by": self.stop, "converged": self.converged, "stop_message": self.stop_message,
+               "at_bounds": self.at_bounds, "initial_loss": self.losses[0], "final_loss": self.losses[-1],
                "gradient_norm": self.gradient_norm, "wall_time_s": self.wall_time_s,
                "compile_time_s": self.compile_time_s}
         if self.true is not None:
@@ -206,7 +228,7 @@ def identify(
         return loss, pred
 
     def advance(u, step, alpha):
-        """``u + alpha * step``, kept inside the parameters' ranges."""
+        """``u + alpha * step``, projected on the parameters' ranges."""
         return {k: jnp.clip(u[k] + alpha * step[k], *bounds[k]) for k in names}
 
     u0 = {k: jnp.asarray(float(params0[k]) / scale[k]) for k in names}
@@ -227,21 +249,24 @@ def identify(
     while it < max_steps:
         if not math.isfinite(losses[-1]):
             raise ConfigError(f"the loss is not finite at {_to_values(u, scale)}; start closer to the data")
-        if float(optax.tree.norm(grad)) < gtol:
-            stop = "gradient"
+        active = _at_bounds(u, bounds)
+        if float(optax.tree.norm(_projected(grad, active))) < gtol:
+            stop = "bound" if _flat_bound(active, grad, losses, gtol) else "gradient"
             break
         it += 1
         step, state = direction(grad, state, u)
+        step = _bounded_step(_free(step, active), MAX_STEP)
         if optimizer == "adam":
             u = advance(u, step, 1.0)
             (value, pred), grad = evaluate(u)
             evaluations += 1
         else:
-            accepted, n = _line_search(evaluate, advance, u, losses[-1], grad, step)
+            accepted, n = _line_search(evaluate, advance, u, losses[-1], _projected(grad, active), step)
             if accepted is None:  # restart L-BFGS from the (normalised) gradient direction
                 state = jax.tree.map(jnp.asarray, opt.init(u))
                 step, state = direction(grad, state, u)
-                accepted, m = _line_search(evaluate, advance, u, losses[-1], grad, step)
+                step = _bounded_step(_free(step, active), MAX_STEP)
+                accepted, m = _line_search(evaluate, advance, u, losses[-1], _projected(grad, active), step)
                 n += m
             evaluations += n
             if accepted is None:
@@ -255,7 +280,8 @@ def identify(
             print(f"  iteration {it}: loss {losses[-1]:.6e}, {values} ({evaluations} evaluations)",
                   file=sys.stderr, flush=True)
         if stalled:
-            stop = "loss"
+            active = _at_bounds(u, bounds)
+            stop = "bound" if _flat_bound(active, grad, losses, gtol) else "loss"
             break
     wall = time.perf_counter() - t0
     return Identification(
@@ -264,8 +290,65 @@ def identify(
         evaluations=evaluations, stop=stop, wall_time_s=wall, compile_time_s=compile_time,
         fitted={k: np.asarray(v) for k, v in pred.items()},
         initial_fit={k: np.asarray(v) for k, v in initial_fit.items()},
-        gradient_norm=float(optax.tree.norm(grad)),
+        gradient_norm=float(optax.tree.norm(grad)), at_bounds=sorted(_at_bounds(u, bounds)),
     )
+
+
+MAX_STEP = 0.5
+"""The largest change of a scaled parameter (its starting value is 1) that
+one iteration tries: a longer step is shortened to it. Through impacts the
+loss is piecewise smooth, and a full quasi-Newton step can land far away in
+a flat region (e = 0: no rebound, no gradient)."""
+
+
+FIT_LOSS = 1e-6
+"""A fit whose loss fell below this fraction of its starting value fits the
+data, even where it stops on a bound with a zero gradient."""
+
+
+def _flat_bound(active, grad, losses, gtol) -> bool:
+    """Stopped on a bound where the whole gradient vanishes without fitting
+    the data: a flat region of the loss (e = 0 for a bouncing ball), no fit."""
+    return bool(active) and float(optax.tree.norm(grad)) < gtol and losses[-1] > FIT_LOSS * losses[0]
+
+
+def _at_bounds(u, bounds) -> dict[str, str]:
+    """The parameters on a bound of their range: ``{name: "lower" | "upper"}``."""
+    out = {}
+    for k, (lo, hi) in bounds.items():
+        x = float(u[k])
+        tol = 1e-12 * max(1.0, abs(x))
+        if x <= lo + tol:
+            out[k] = "lower"
+        elif x >= hi - tol:
+            out[k] = "upper"
+    return out
+
+
+def _projected(grad, active):
+    """The gradient with the components that push out of the range zeroed
+    (a bound the loss pushes into is where a bounded minimum lies)."""
+    def keep(k, g):
+        side = active.get(k)
+        return jnp.where((side == "lower" and g > 0) or (side == "upper" and g < 0), 0.0, g) if side else g
+
+    return {k: keep(k, g) for k, g in grad.items()}
+
+
+def _free(step, active):
+    """The step with the components that would leave the range through an
+    active bound zeroed (the projected direction)."""
+    def keep(k, d):
+        side = active.get(k)
+        return jnp.where((side == "lower" and d < 0) or (side == "upper" and d > 0), 0.0, d) if side else d
+
+    return {k: keep(k, d) for k, d in step.items()}
+
+
+def _bounded_step(step, largest: float):
+    """``step`` shortened so that no component exceeds ``largest``."""
+    size = max(float(jnp.max(jnp.abs(d))) for d in step.values())
+    return step if size <= largest else {k: d * (largest / size) for k, d in step.items()}
 
 
 def _line_search(evaluate, advance, u, value, grad, step, trials: int = 30, c1: float = 1e-4):
