@@ -117,6 +117,18 @@ def make_reference(scene_name: str, overrides: dict, ref: str | float) -> Refere
     return Reference(f"{scene.solver['scheme'].upper()} at h = {h_ref:g} s", solution=sol, wall_time=wall)
 
 
+def check_reference(reference: Reference, names, t_end: float, h: float) -> None:
+    """Refuse a reference on which eq. 52 is undefined for an observable (it
+    is zero at every time of the study), before the study runs."""
+    ts = np.arange(step_count(0.0, t_end, h) + 1) * h
+    values = reference.values(ts, names)
+    for k in names:
+        if not np.any(np.abs(np.asarray(values[k])) > 0.0):
+            raise ConfigError(f"the reference ({reference.description}) of observable {k!r} is zero at every time "
+                              "of the study, so its eq. 52 error is undefined; choose other observables "
+                              "(--observables) or another setup")
+
+
 @dataclass
 class StudyRow:
     scheme: str
@@ -157,6 +169,8 @@ def study(scene_name: str, schemes, hs, reference: Reference, overrides: dict | 
     records the failure.
     """
     overrides = dict(overrides or {})
+    base = load_scene(scene_name, overrides)
+    check_reference(reference, list(observables or base.spec.error_observables), base.solver["t_end"], max(hs))
     rows = []
     for scheme in schemes:
         scene = load_scene(scene_name, {**overrides, "scheme": scheme})

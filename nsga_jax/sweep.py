@@ -20,6 +20,7 @@ eq. 52 error of its observables (on the recorded steps, at most
 
 from __future__ import annotations
 
+import csv
 import itertools
 import json
 import math
@@ -38,7 +39,7 @@ from .batch import BatchRun, member_mesh, member_solution, stack_models
 from .distributed import agree
 from .metrics import relative_l1_error
 from .results import ConfigError
-from .scenes.base import Scene, load_scene
+from .scenes.base import Configured, Scene, configure
 from .tables import read_csv, write_csv
 from .validation import step_count
 
@@ -86,21 +87,35 @@ def parse_grid(text: str) -> dict[str, np.ndarray]:
     return grid
 
 
+MAX_MEMBERS = 1_000_000
+"""The most runs one sweep may hold (each is validated before anything runs)."""
+
+
 @dataclass
 class Member:
-    """One run of a sweep: its swept values (with h) and its built scene."""
+    """One run of a sweep: its swept values (with h) and its validated
+    settings; the scene (its model) is built when its batch runs."""
 
     index: int
     values: dict[str, float]
-    scene: Scene
+    configured: Configured
+    _scene: Scene | None = None
+
+    @property
+    def scene(self) -> Scene:
+        if self._scene is None:
+            self._scene = self.configured.build()
+        return self._scene
 
 
 def members(scene: str | Path, grid: dict[str, Sequence[float]], hs: Sequence[float] | None,
-            overrides: dict[str, Any] | None) -> list[Member]:
+            overrides: dict[str, Any] | None, progress: bool = False) -> list[Member]:
     """Every combination of the grid's values and of the step sizes, each
-    validated and built (bad values raise :class:`ConfigError` before anything
-    is compiled)."""
-    base = load_scene(scene, overrides)
+    validated (bad values raise :class:`ConfigError` before anything is
+    compiled; models are built batch by batch)."""
+    base = configure(scene, overrides)
+    if not isinstance(grid, dict) or not grid:
+        raise ConfigError(f"the grid must be a non-empty dict {{parameter: values}}, got {grid!r}")
     grid = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in grid.items()}
     if "h" in grid:
         if hs is not None:
@@ -110,15 +125,28 @@ def members(scene: str | Path, grid: dict[str, Sequence[float]], hs: Sequence[fl
     for k in grid:
         if k not in floats:
             kind = "a structural parameter" if k in base.spec.parameters else "not a parameter"
-            raise ConfigError(f"cannot sweep {k!r} of {base.name}: {kind}; sweepable: {', '.join(floats + ['h'])} "
-                              "(set structural parameters with overrides, one sweep per value)")
+            raise ConfigError(f"cannot sweep {k!r} of {base.spec.name}: {kind}; sweepable: "
+                              f"{', '.join(floats + ['h'])} (set structural parameters with overrides, one sweep "
+                              "per value)")
     hs = [base.solver["h"]] if hs is None else [float(h) for h in np.atleast_1d(hs)]
     keys = list(grid)
+    total = math.prod(len(grid[k]) for k in keys) * len(hs)
+    if total > MAX_MEMBERS:
+        sizes = " x ".join(f"{len(grid[k])} {k}" for k in keys) + f" x {len(hs)} h"
+        raise ConfigError(f"the sweep has {total:,} runs ({sizes}); at most {MAX_MEMBERS:,} are allowed: "
+                          "use fewer values, or several sweeps")
+    for k in keys:  # each value against its range once, before the combinations
+        for x in np.unique(grid[k]):
+            base.spec.parameters[k].check(k, float(x))
     out = []
+    shown = time.perf_counter()
     for i, combo in enumerate(itertools.product(*(grid[k] for k in keys), hs)):
         values = {k: float(v) for k, v in zip(keys, combo[:-1])}
         values["h"] = float(combo[-1])
-        out.append(Member(i, values, load_scene(scene, {**(overrides or {}), **values})))
+        out.append(Member(i, values, configure(scene, {**(overrides or {}), **values})))
+        if progress and time.perf_counter() - shown > 1.0:
+            shown = time.perf_counter()
+            print(f"\r  validating runs: {i + 1:,}/{total:,}", end="", file=sys.stderr, flush=True)
     return out
 
 
@@ -265,7 +293,7 @@ def sweep(
     devices = jax.devices() if devices is None else list(devices)
     if not devices:
         raise ConfigError("devices must name at least one device")
-    mems = members(scene, grid, hs, overrides)
+    mems = members(scene, grid, hs, overrides, progress)
     swept = [k for k in mems[0].values]
     mesh = member_mesh(devices) if len(devices) > 1 else None
     n_dev = len(devices)
@@ -279,14 +307,14 @@ def sweep(
 
     out_dir = None if out is None else Path(out)
     if out_dir is not None:
-        _claim(out_dir, scene, grid, hs, overrides, batch_size, len(mems))
+        _claim(out_dir, scene, grid, hs, overrides, batch_size, len(mems), max_records)
     result = SweepResult(rows=[], swept=swept)
     t_start = time.perf_counter()
     for k in range(n_batches):
         batch = mems[k * batch_size:(k + 1) * batch_size]
         path = None if out_dir is None else out_dir / "batches" / f"batch_{k:05d}.csv"
         if agree(path is not None and path.exists()):  # process 0 decides: every process skips or runs it
-            rows = read_csv(path) if path.exists() else []
+            rows = _read_batch(path, batch) if path.exists() else []
         else:
             rows, compile_time, wall = _batch_rows(batch, padded, mesh, max_records)
             result.compile_time += compile_time
@@ -307,26 +335,65 @@ def sweep(
     return result
 
 
-def _claim(out_dir: Path, scene, grid, hs, overrides, batch_size: int, n: int) -> None:
+def _claim(out_dir: Path, scene, grid, hs, overrides, batch_size: int, n: int, max_records: int) -> None:
     """Write ``DIR/sweep.json`` describing the sweep, or check that the one
-    there describes the same sweep (else resuming would mix two sweeps).
+    there describes the same sweep (else resuming would mix two sweeps),
+    naming every setting that differs.
 
     Process 0 alone reads and writes it, and every process raises if it holds
-    another sweep (:func:`~nsga_jax.distributed.agree`): no process reads a
-    half-written file, and none goes on into batches the others refused."""
+    another sweep or cannot be read (:func:`~nsga_jax.distributed.agree`): no
+    process reads a half-written file, and none goes on into batches the
+    others refused."""
     spec = {"scene": str(scene), "grid": {k: [float(x) for x in np.atleast_1d(v)] for k, v in grid.items()},
             "hs": None if hs is None else [float(h) for h in np.atleast_1d(hs)],
-            "overrides": {k: v for k, v in (overrides or {}).items()}, "batch_size": batch_size, "members": n}
+            "overrides": {k: v for k, v in (overrides or {}).items()}, "batch_size": batch_size, "members": n,
+            "max_records": max_records}
     manifest = out_dir / "sweep.json"
-    same = True
+    problem = ""
     if jax.process_index() == 0:
         if manifest.exists():
-            same = json.loads(manifest.read_text()) == json.loads(json.dumps(spec))
+            try:
+                found = json.loads(manifest.read_text())
+                if not isinstance(found, dict):
+                    raise ValueError("not a JSON object")
+            except (ValueError, UnicodeDecodeError) as err:
+                problem = (f"{manifest} cannot be read ({err}): the folder's sweep is unknown; remove the "
+                           "folder (or choose another) to start afresh")
+            else:
+                wanted = json.loads(json.dumps(spec))
+                differ = [k for k in sorted(set(wanted) | set(found)) if wanted.get(k) != found.get(k)]
+                if differ:
+                    listed = "; ".join(f"{k}: {found.get(k)!r} there, {wanted.get(k)!r} now" for k in differ)
+                    problem = (f"{out_dir} holds another sweep ({manifest}), which a resume would mix with this "
+                               f"one; they differ in {listed}. Use another folder, or remove it")
         else:
             (out_dir / "batches").mkdir(parents=True, exist_ok=True)
             manifest.write_text(json.dumps(spec, indent=2) + "\n")
-    if not agree(same):
-        raise ConfigError(f"{out_dir} holds another sweep ({manifest}); use another directory or remove it")
+    if not agree(not problem):
+        raise ConfigError(problem or f"{out_dir} holds another sweep, or its {manifest.name} cannot be read "
+                                     "(process 0 says why)")
+
+
+def _read_batch(path: Path, batch: list[Member]) -> list[dict]:
+    """A finished batch's rows, checked against the members it must hold: a
+    truncated, empty or foreign batch file is a named error, never a shorter
+    table."""
+    try:
+        rows = read_csv(path)
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise ConfigError(f"batch file {path} cannot be read ({err}); delete it to run that batch again") from None
+    members_there = [r.get("member") for r in rows]
+    expected = [m.index for m in batch]
+    if members_there != expected:
+        raise ConfigError(f"batch file {path} holds runs {members_there[:5]}{'...' if len(rows) > 5 else ''} "
+                          f"({len(rows)} rows), where this sweep's batch holds runs {expected[0]}..{expected[-1]} "
+                          f"({len(expected)} rows): it is incomplete or from another sweep; delete it to run that "
+                          "batch again")
+    for r in rows:
+        if r.get("result") in (None, "") or any(r.get(k) in (None, "") for k in batch[0].values):
+            raise ConfigError(f"batch file {path} has an incomplete row (run {r.get('member')}); delete it to "
+                              "run that batch again")
+    return rows
 
 
 def _progress(done: int, total: int, members_done: int, members: int, elapsed: float) -> None:

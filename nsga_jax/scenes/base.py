@@ -110,9 +110,8 @@ class SceneSpec:
     """The observables the paper's convergence studies measure (eq. 52)."""
 
     def build(self, parameters: dict[str, Any], solver: dict[str, Any]) -> Scene:
-        """A :class:`Scene` from validated parameters and solver settings."""
-        if self.check is not None:
-            self.check(parameters)
+        """A :class:`Scene` from validated parameters and solver settings
+        (:func:`configure` has run the scene's check)."""
         model, q0, v0, observe = self.make(parameters, parameters)
         exact = self.exact(parameters) if self.exact is not None else None
         return Scene(self.name, model, np.asarray(q0, float), np.asarray(v0, float), parameters, solver,
@@ -258,15 +257,24 @@ def resolve_scene(name_or_path: str | Path, relative_to: Path | None = None) -> 
                       "or give a .toml config or a .py scene file")
 
 
-def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
-    """Build a scene from a built-in name, a TOML config or a Python scene
-    file (see :func:`resolve_scene`), with overrides.
+@dataclass(frozen=True)
+class Configured:
+    """A scene's validated settings, before its model is built (no JAX)."""
 
-    Overrides are flat ``key: value`` pairs; a key is looked up among the
-    scene's parameters, then the solver settings. Unknown keys, bad values and
-    inconsistent setups (e.g. an initial penetration) raise
-    :class:`~nsga_jax.ConfigError` before anything is compiled.
-    """
+    spec: SceneSpec
+    parameters: dict[str, Any]
+    solver: dict[str, Any]
+
+    def build(self) -> Scene:
+        return self.spec.build(self.parameters, self.solver)
+
+
+def configure(name_or_path: str | Path, overrides: dict[str, Any] | None = None) -> Configured:
+    """Validate a scene's settings (a built-in name, a TOML config or a Python
+    scene file, see :func:`resolve_scene`, with overrides) without building
+    its model: every field against its range, the solver's cross-field rules
+    and the scene's own consistency check (an initial penetration...).
+    Raises :class:`~nsga_jax.ConfigError` (or :class:`TypeError`)."""
     if not isinstance(name_or_path, (str, Path)):
         raise TypeError(f"scene must be a scene name or a path (str or pathlib.Path), "
                         f"got {type(name_or_path).__name__} {name_or_path!r}")
@@ -293,7 +301,22 @@ def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | None = None
     parameters = check_all(f"{name} parameter", spec.parameters, params_in)
     solver = check_all("solver", solver_specs, solver_in)
     check_solver(solver)
-    return spec.build(parameters, solver)
+    if spec.check is not None:
+        spec.check(parameters)
+    return Configured(spec, parameters, solver)
+
+
+def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
+    """Build a scene from a built-in name, a TOML config or a Python scene
+    file (see :func:`resolve_scene`), with overrides.
+
+    Overrides are flat ``key: value`` pairs; a key is looked up among the
+    scene's parameters, then the solver settings. Unknown keys, bad values and
+    inconsistent setups (e.g. an initial penetration) raise
+    :class:`~nsga_jax.ConfigError` before anything is compiled
+    (:func:`configure`).
+    """
+    return configure(name_or_path, overrides).build()
 
 
 def parametrize(name_or_path: str | Path, overrides: dict[str, Any] | None = None,
