@@ -230,19 +230,25 @@ def _step_sizes(text: str) -> list[float]:
 def _convergence(args) -> int:
     from .folders import writable_folder
     from .scenes import load_scene, parse_override
+    from .validation import real
 
     overrides = dict(parse_override(s) for s in args.set)
     if args.t_end is not None:
         overrides["t_end"] = args.t_end
     schemes = [s.strip() for s in args.scheme.split(",") if s.strip()]
+    if not schemes:
+        raise ConfigError(f"--scheme expects comma-separated schemes (ds, dsn, cs, mj), got {args.scheme!r}")
     for s in schemes + [args.ref_scheme]:
         if s not in ("ds", "dsn", "cs", "mj"):
             raise ConfigError(f"scheme must be one of ds, dsn, cs, mj, got {s!r}")
     hs = _step_sizes(args.h)
+    if args.ref_h is not None:
+        real("--ref-h", args.ref_h, 0.0, lo_open=True, unit="s")
     scene = load_scene(args.scene, overrides)  # validates everything before anything runs
     for h in hs:
         load_scene(args.scene, {**overrides, "h": h})
-    observables = args.observables.split(",") if args.observables else list(scene.spec.error_observables)
+    observables = (_names("--observables", args.observables) if args.observables is not None
+                   else list(scene.spec.error_observables))
     unknown = [k for k in observables if k not in scene.spec.observables]
     if unknown:
         raise ConfigError(f"unknown observable {unknown[0]!r}; {scene.name} has {', '.join(scene.spec.observables)}")
@@ -269,11 +275,21 @@ def _convergence(args) -> int:
     return 0
 
 
-def _assignments(items: list[str]) -> dict:
+def _names(option: str, text: str) -> list[str]:
+    """Comma-separated names of an option, at least one."""
+    names = [k.strip() for k in text.split(",") if k.strip()]
+    if not names:
+        raise ConfigError(f"{option} expects comma-separated names, got {text!r}")
+    return names
+
+
+def _assignments(items: list[str], option: str = "") -> dict:
     """``["a=1,b=2", "c=3"]`` -> ``{"a": 1.0, "b": 2.0, "c": 3.0}``."""
     from .scenes import parse_override
 
     parts = [part for item in items for part in item.split(",") if part.strip()]
+    if len(parts) < len(items):
+        raise ConfigError(f"{option} expects KEY=VALUE, got {items!r}")
     for part in parts:
         if "=" not in part:
             raise ConfigError(f"expected KEY=VALUE, got {part!r}")
@@ -289,8 +305,8 @@ def _identify(args) -> int:
     for key, value in (("h", args.h), ("t_end", args.t_end)):
         if value is not None:
             overrides[key] = value
-    names = [k.strip() for k in args.params.split(",") if k.strip()]
-    true, initial = _assignments(args.true), _assignments(args.initial)
+    names = _names("--params", args.params)
+    true, initial = _assignments(args.true, "--true"), _assignments(args.initial, "--initial")
     for label, values in (("--true", true), ("--initial", initial)):
         extra = [k for k in values if k not in names]
         if extra:
@@ -303,12 +319,23 @@ def _identify(args) -> int:
         raise ConfigError(f"--noise must be in [0, 1) (a fraction of the RMS), got {args.noise}")
     scene = load_scene(args.scene, {**overrides, **true})  # validates before anything runs
     load_scene(args.scene, {**overrides, **initial})
+    floats = [k for k, p in scene.spec.parameters.items() if p.kind == "float"]
+    for k in names:
+        if k not in floats:
+            raise ConfigError(f"--params: {k!r} is not a float parameter of {scene.name}; identifiable: "
+                              f"{', '.join(floats)}")
+    if args.observables is not None:
+        unknown = [k for k in _names("--observables", args.observables) if k not in scene.spec.observables]
+        if unknown:
+            raise ConfigError(f"--observables: unknown observable {unknown[0]!r}; {scene.name} has "
+                              f"{', '.join(scene.spec.observables)}")
     out = writable_folder(args.out or Path("nsga_out") / f"{scene.name}_identify")
     _use_cache(args)
     from .identify import Data, identify, synthetic_data, write_identification
 
     if args.synthetic:
-        observables = args.observables.split(",") if args.observables else [scene.spec.observables[0]]
+        observables = (_names("--observables", args.observables) if args.observables is not None
+                       else [scene.spec.observables[0]])
         true = {k: scene.parameters[k] for k in names}
         print(f"synthetic data: {scene.name} with {true}, noise {args.noise:g}", file=sys.stderr)
         data = synthetic_data(args.scene, {**overrides, **true}, observables, noise=args.noise,
@@ -394,12 +421,14 @@ def _sweep(args) -> int:
 def _bench(args) -> int:
     from .bench import bench, markdown
     from .folders import writable_folder
+    from .validation import real
 
     scenes = None if args.scenes is None else args.scenes.split(",")
     try:
         batches = [int(b) for b in args.batch.split(",")]
     except ValueError:
         raise ConfigError(f"--batch expects comma-separated integers, got {args.batch!r}") from None
+    real("--max-seconds", args.max_seconds, 0.0, lo_open=True, unit="s")
     writable_folder(args.out)
     rows = bench(scenes, batches, args.dtype.split(","), scheme=args.scheme, repeats=args.repeats,
                  max_steps=args.max_steps, max_seconds=args.max_seconds, out=args.out)

@@ -97,7 +97,9 @@ def test_failure_exit_code_and_no_throw(tmp_path, capsys):
     assert "position correction" in err and "step" in err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["failed_steps"] == 1 and summary["error"]
-    assert main(args + ["--no-throw"]) == 0
+    assert main(args + ["--no-throw"]) == 2  # the folder holds that run: never mixed with another
+    assert "holds an earlier run" in capsys.readouterr().err
+    assert main(args + ["--no-throw", "--overwrite"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["failed_steps"] >= 1 and summary["n_steps"] == 1000 and summary["error"] is None
 
