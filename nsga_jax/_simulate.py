@@ -300,7 +300,7 @@ def simulate(
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
     require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.monitors.Tolerances")
     template = output_template(model, np.dtype(dtype))
-    check_memory(model.n_dof, np.dtype(dtype).itemsize, records=-(-n_steps // record_every) + 2,
+    check_memory(model.n_dof, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
                  record_numbers=sum(packed_sizes(template)))
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     with precision(dtype):

@@ -328,7 +328,7 @@ def simulate_batch(
         require_instance("mesh", mesh, Mesh, "a jax.sharding.Mesh (nsga_jax.batch.member_mesh)")
     n_steps = np.array([g[3] for g in grids])
     template = output_template(model, np.dtype(dtype))
-    check_memory(model.n_dof, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()) + 1,
+    check_memory(model.n_dof, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
                  record_numbers=sum(packed_sizes(template)), what="each run's model")
     B = len(hs)
     with precision(dtype):

@@ -25,7 +25,7 @@ MAX_STEPS = 2**62
 and the compiled loops count only within a chunk, so no counter overflows;
 this bound only keeps ``t0 + n h`` meaningful."""
 
-TIME_RESOLUTION = 16.0
+TIME_RESOLUTION = 2.0
 """A step must be at least this many units in the last place of the run's
 latest time in its precision: below that, ``t + h`` rounds back to ``t`` (or
 to a visibly wrong time) and the run would never advance."""
@@ -164,7 +164,7 @@ def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 
     member) and kept records (``records`` steps of ``record_numbers`` numbers
     per member) would not fit in :func:`available_memory`, naming the estimate."""
     dense = DENSE_MATRICES * n_dof**2 * itemsize * members
-    kept = records * record_numbers * itemsize * members
+    kept = (records + 1) * record_numbers * itemsize * members  # and the initial state
     limit = available_memory()
     if dense > limit:
         raise ConfigError(

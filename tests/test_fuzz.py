@@ -52,7 +52,7 @@ def test_step_counts_past_two_to_the_31_are_counted_exactly():
 
 
 def test_a_run_of_more_steps_than_memory_holds_is_refused_with_the_estimate():
-    with pytest.raises(nj.ConfigError, match=r"records of 1000000000001 steps .* GiB.*record_every"):
+    with pytest.raises(nj.ConfigError, match=r"records of 1000000000000 steps .* GiB.*record_every"):
         nj.simulate(BALL, nj.DS(), 0.0, 1.0, 1e-12, [1.0], [0.0])
 
 
