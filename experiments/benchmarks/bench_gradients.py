@@ -1,7 +1,7 @@
 """Cost of a gradient through a whole trajectory: time of ``jax.grad`` relative
 to the forward run, and memory, for 1e3, 1e4 and 1e5 steps of the impacting bar.
 
-    python experiments/bench_gradients.py [--steps 1000,10000,100000] [--repeat 3]
+    python experiments/benchmarks/bench_gradients.py [--steps 1000,10000,100000] [--repeat 3]
 
 Loss: the mean square tip displacement (200 elements, h = 1e-3 s, DS; the bar
 hits the wall at 0.5 s and flies off after 1.17 s), observed step by step so

@@ -9,7 +9,7 @@ bottom corner) rests on the floor through that window (e = 0; it lifts off
 about 25 ms after the impact), so the errors are measured on the top corner
 above it, x8, as well.
 
-    python experiments/paper_cube.py [--out experiments/out/paper_cube]
+    python experiments/paper/paper_cube.py [--out experiments/out/paper_cube]
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def main() -> None:
          f"CS converged at h = {', '.join(f'{h:g}' for h in cs_ok) or 'none'}",
          all(h <= 3e-5 for h in cs_ok) and 1e-5 in cs_ok),
     ]
-    finish("flexible_cube", rows, reference, elapsed, claims, out, "python experiments/paper_cube.py")
+    finish("flexible_cube", rows, reference, elapsed, claims, out, "python experiments/paper/paper_cube.py")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Stability on stiff and extreme cases: every case of configs/extreme/ plus
 step-size sweeps of the ball and the bar, with DS, DSn, CS and MJ.
 
-    python experiments/stability.py [--only NAME,...] [--schemes ds,dsn,cs,mj] [--out DIR]
+    python experiments/studies/stability.py [--only NAME,...] [--schemes ds,dsn,cs,mj] [--out DIR]
 
 Each run goes on past failures (throw=False) so that the table shows what
 happened: outcome (converged, or the first failure's code, step count and

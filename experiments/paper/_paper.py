@@ -1,4 +1,4 @@
-"""Shared driver of the paper-reproduction scripts (experiments/paper_*.py)."""
+"""Shared driver of the paper-reproduction scripts (experiments/paper/paper_*.py)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Per-step cost of the DS stepper on every built-in scene, split against its parts.
 
-    python experiments/bench_scenes.py [--repeats 3] [--scenes a,b] [--out experiments/out/bench]
+    python experiments/benchmarks/bench_scenes.py [--repeats 3] [--scenes a,b] [--out experiments/out/bench]
 
 For each scene: the time per step of complete runs (minimum over repeats;
 compile time apart, from the first run) and, measured in the same process at

@@ -1,6 +1,6 @@
 """One short check of an accelerator (GPU) machine: the same results as the CPU, then the benchmark.
 
-    python experiments/device_check.py --out DIR [--max-steps 500] [--repeats 1] [--max-seconds 20]
+    python experiments/tools/device_check.py --out DIR [--max-steps 500] [--repeats 1] [--max-seconds 20]
 
 Run it from the repository root where JAX sees the accelerator (``pip install
 -e .`` there, or ``PYTHONPATH=.``). It prints and writes to ``DIR``:
@@ -17,8 +17,8 @@ Run it from the repository root where JAX sees the accelerator (``pip install
    column names the accelerator.
 
 On a CPU-only machine the "default device" is the CPU and the check compares
-it with itself; it is meant for a machine with an accelerator, where the
-README's GPU rows come from it.
+it with itself; it is meant for a machine with an accelerator, where it
+fills the GPU rows of the benchmark (docs/performance.md).
 """
 
 from __future__ import annotations

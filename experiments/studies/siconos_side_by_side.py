@@ -2,7 +2,7 @@
 200-element bar, the same step sizes, one run; error (eq. 52) against the exact
 solution and time per step for both.
 
-    python experiments/siconos_side_by_side.py [--out docs/results/siconos]
+    python experiments/studies/siconos_side_by_side.py [--out docs/results/siconos]
 
 Siconos (Moreau–Jean, θ = 0.5, an LCP per step) runs under the Debian system
 Python, which has the ``python3-siconos`` package; nothing is installed here.

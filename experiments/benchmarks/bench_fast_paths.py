@@ -1,7 +1,7 @@
 """What the fast paths buy: time per step with and without them, and the
 largest difference of the two trajectories.
 
-    python experiments/bench_fast_paths.py [--out docs/results/bench] [--scenes a,b]
+    python experiments/benchmarks/bench_fast_paths.py [--out docs/results/bench] [--scenes a,b]
 
 The fast path keeps what the model's static structure makes constant (mass,
 tangents, constraint Jacobian, inverted iteration matrices, the diagonals of

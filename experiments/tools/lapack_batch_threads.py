@@ -1,6 +1,6 @@
 """Which batched LU factorisations jaxlib's CPU kernel spreads over threads.
 
-    python experiments/lapack_batch_threads.py [--sizes 2,8,12,16,27] [--batches 8,16,32,64,128]
+    python experiments/tools/lapack_batch_threads.py [--sizes 2,8,12,16,27] [--batches 8,16,32,64,128]
 
 For each matrix size n and batch B, a compiled loop factors B matrices of
 n × n (``jax.scipy.linalg.lu_factor``) 3e8 / (B n³) times (200 to 20,000) on one CPU

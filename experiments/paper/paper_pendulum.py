@@ -1,6 +1,6 @@
 """Paper §4.3, Figs. 7-8: the flexible pendulum with DS and CS (and DSn, MJ for error against time).
 
-    python experiments/paper_pendulum.py [--out experiments/out/paper_pendulum]
+    python experiments/paper/paper_pendulum.py [--out experiments/out/paper_pendulum]
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def main() -> None:
          f"DS failures: {', '.join(f'{h:g}' for h in ds_fail) or 'none'}; at most {ds_max} solves per step",
          not ds_fail and ds_max <= 10),
     ]
-    finish("flexible_pendulum", rows, reference, elapsed, claims, out, "python experiments/paper_pendulum.py")
+    finish("flexible_pendulum", rows, reference, elapsed, claims, out, "python experiments/paper/paper_pendulum.py")
 
 
 if __name__ == "__main__":

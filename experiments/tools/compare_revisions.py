@@ -1,6 +1,6 @@
 """A scene's per-step time and compile work at two git revisions, interleaved.
 
-    python experiments/compare_revisions.py BASE [HEAD] --scene flexible_pendulum [--pairs 4] [--batch 64] [--cpus 1]
+    python experiments/tools/compare_revisions.py BASE [HEAD] --scene flexible_pendulum [--pairs 4] [--batch 64] [--cpus 1]
 
 Each revision is checked out into a temporary worktree and run in its own
 process, alternately (BASE, HEAD, BASE, HEAD, ...), so that the slow and fast
@@ -32,7 +32,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 # The child imports the private helpers bench._bench_scene and _simulate._n_steps on purpose:
 # they exist under these names in every revision this script compares.

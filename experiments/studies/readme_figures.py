@@ -1,6 +1,6 @@
-"""Regenerate the figures shown in README.md (about half a minute on 2 cores).
+"""Regenerate the figures of README.md and docs/accuracy.md (about half a minute on 2 cores).
 
-    python experiments/readme_figures.py [--out docs/figures]
+    python experiments/studies/readme_figures.py [--out docs/figures]
 """
 
 from __future__ import annotations

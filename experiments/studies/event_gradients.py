@@ -2,7 +2,7 @@
 (``adjoint="event"``), finite differences with a small and a large step, and
 the exact continuous-time derivative, for several step sizes.
 
-    python experiments/event_gradients.py [--only ball,pendulum,bar,box_flat]
+    python experiments/studies/event_gradients.py [--only ball,pendulum,bar,box_flat]
 
 Cases (loss: mean square mismatch of one observable sampled every 10 ms against
 data from the exact solution at other parameter values):

@@ -1,9 +1,9 @@
 """float32 against float64 on every built-in scene, with DS.
 
-    python experiments/precision.py [--out DIR] [--only NAME,...]
+    python experiments/studies/precision.py [--out DIR] [--only NAME,...]
 
 For each scene (its default config; the cube on a 20 ms window around its
-impact, as experiments/paper_cube.py), runs in
+impact, as experiments/paper/paper_cube.py), runs in
 float64 and in float32 at the default tolerance tol_r = 1e-5, and in float32 at
 tol_r = 1e-6 and 1e-7, all at the scene's step h, and a float64 reference at
 h/4. Reports per run: failed steps (eq. 51 not met within the iteration cap),

@@ -1,7 +1,7 @@
 """Identification from data of the *exact* (continuous-time) solution, with
 discrete and event-aware gradients.
 
-    python experiments/identify_exact_data.py
+    python experiments/studies/identify_exact_data.py
 
 (a) bouncing ball: e and the drop height from heights of the closed-form
     solution (e = 0.8, h0 = 1 m), sampled every 5 ms over 1.5 s;

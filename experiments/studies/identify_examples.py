@@ -1,7 +1,7 @@
 """Parameter identification through impacts (optax L-BFGS, gradients through the
 whole nonsmooth trajectory), from noisy synthetic data, starting 30 % off.
 
-    python experiments/identify_examples.py [--only bar,ball,box] [--out experiments/out/identify]
+    python experiments/studies/identify_examples.py [--only bar,ball,box] [--out experiments/out/identify]
 
 (a) impacting bar: Young's modulus E and restitution e from the tip displacement
     and velocity, in two stages: E from the displacement alone, then E and e
@@ -78,7 +78,7 @@ def run_case(name: str, out: Path) -> dict:
 
 
 def bar_checks() -> dict:
-    """What the README says about the bar: e barely shows in the tip signals,
+    """What docs/gradients.md says about the bar: e barely shows in the tip signals,
     and fitting E and e together from 30 % off stalls."""
     import jax
     import jax.numpy as jnp

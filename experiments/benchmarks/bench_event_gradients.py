@@ -2,7 +2,7 @@
 the 200-element bar's mean square tip displacement over 1500 steps (h = 1e-3),
 compile time apart, minimum of 3.
 
-    python experiments/bench_event_gradients.py
+    python experiments/benchmarks/bench_event_gradients.py
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Paper §4.2, Figs. 4-6: the elastic bar with DS, DSn, CS (and MJ for error against time).
 
-    python experiments/paper_bar.py [--out experiments/out/paper_bar]
+    python experiments/paper/paper_bar.py [--out experiments/out/paper_bar]
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def main() -> None:
          f"max overlap {pen[('dsn', 0.03)]:.3f} m (DS {pen[('ds', 0.03)]:.3f} m)",
          pen[("dsn", 0.03)] > 0 >= pen[("ds", 0.03)]),
     ]
-    finish("impacting_bar", rows, reference, elapsed, claims, out, "python experiments/paper_bar.py")
+    finish("impacting_bar", rows, reference, elapsed, claims, out, "python experiments/paper/paper_bar.py")
 
 
 if __name__ == "__main__":

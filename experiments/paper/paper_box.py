@@ -1,6 +1,6 @@
 """Paper §4.1, Figs. 2-3: the spinning rigid box with DS and CS (and DSn, MJ for error against time).
 
-    python experiments/paper_box.py [--out experiments/out/paper_box]
+    python experiments/paper/paper_box.py [--out experiments/out/paper_box]
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def main() -> None:
         ("DS needs fewer iterations (maximum)", "max solves/step DS vs CS: " + ", ".join(
             f"{h:g}: {solves('ds', h, 'max')} vs {solves('cs', h, 'max')}" for h in HS), fewer_max),
     ]
-    finish("rigid_box", rows, reference, elapsed, claims, out, "python experiments/paper_box.py")
+    finish("rigid_box", rows, reference, elapsed, claims, out, "python experiments/paper/paper_box.py")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 ball's restitution e, discrete gradient vs finite differences vs the exact
 continuous-time derivative.
 
-    python experiments/gradient_staircase.py
+    python experiments/studies/gradient_staircase.py
 
 Loss: mean square mismatch of the height, sampled every 10 ms over 1.5 s (three
 impacts), against the exact solution at e = 0.8. The DS loss is a fine

@@ -6,7 +6,7 @@ for a single run and for a batch of members (``vmap``). Prints µs per solve
 (chained calls in a compiled loop, best of 5, three measurements each) and
 checks that the three agree.
 
-    python experiments/bench_tridiagonal.py [--batch 64]
+    python experiments/benchmarks/bench_tridiagonal.py [--batch 64]
 """
 
 import argparse

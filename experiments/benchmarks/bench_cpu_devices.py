@@ -1,6 +1,6 @@
 """A batch on one CPU device against the same batch split over N forced host devices.
 
-    python experiments/bench_cpu_devices.py [--scenes a,b] [--batch 64] [--devices 2] [--rounds 2] [--timeout 300]
+    python experiments/benchmarks/bench_cpu_devices.py [--scenes a,b] [--batch 64] [--devices 2] [--rounds 2] [--timeout 300]
 
 For each scene's ``nsga-jax bench`` case (float64), a batch of identical
 members runs in a fresh process with one CPU device and in one with
@@ -9,7 +9,7 @@ device mesh, as a sweep does), alternately, ``--rounds`` times. Each process
 prints the best µs per batch step of three runs (compile apart). A process
 that has not finished within ``--timeout`` seconds is reported as hung: on
 jaxlib 0.10, large batched LU calls can deadlock several host devices, which
-``bounded_lapack_batches`` prevents (README, "Several devices"); the flexible
+``bounded_lapack_batches`` prevents (docs/sweeps-and-devices.md); the flexible
 pendulum hung here before it.
 """
 

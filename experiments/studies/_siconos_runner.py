@@ -1,9 +1,9 @@
 """Run one problem in Siconos (Moreau–Jean, θ = 0.5, LCP) and save its trajectory.
 
-Run by ``experiments/siconos_side_by_side.py`` with the Debian system Python,
+Run by ``experiments/studies/siconos_side_by_side.py`` with the Debian system Python,
 which has the ``python3-siconos`` package (it needs only NumPy besides):
 
-    /usr/bin/python3 experiments/_siconos_runner.py SPEC.npz RESULT.npz
+    /usr/bin/python3 experiments/studies/_siconos_runner.py SPEC.npz RESULT.npz
 
 SPEC holds a linear time-invariant Lagrangian system and one unilateral
 constraint y = H q + b >= 0 with Newton's impact law: q0, v0, M, K (n × n),

@@ -1,7 +1,7 @@
 """How to run a sweep over step sizes: separate runs, one padded vmap, or vmap
 over groups of similar step counts. Measures all three on the same sweeps.
 
-    python experiments/bench_batch_h.py [--out experiments/out/bench]
+    python experiments/benchmarks/bench_batch_h.py [--out experiments/out/bench]
 
 Prints and writes ``bench_batch_h.csv``: scene, sweep, mode, wall time of the
 runs (compile excluded) and compile time.

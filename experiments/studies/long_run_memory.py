@@ -2,7 +2,7 @@
 1e5 and 1e6 steps, keeping every step's records or every 1000th
 (``record_every``; statistics still cover every step).
 
-    python experiments/long_run_memory.py [--out DIR]
+    python experiments/studies/long_run_memory.py [--out DIR]
 
 Each run is a fresh process, which reports its own peak resident set size
 (``ru_maxrss``) and the run's statistics. Writes DIR/long_run_memory.csv/.md.
