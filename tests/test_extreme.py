@@ -1,4 +1,4 @@
-"""The fast subset of configs/extreme/ (experiments/stability.py runs them all,
+"""The fast subset of configs/extreme/ (experiments/studies/stability.py runs them all,
 with every scheme): invariants that must hold on elastic, plastic, resting,
 simultaneous, stiff and tiny- or huge-step cases."""
 

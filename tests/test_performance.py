@@ -143,13 +143,13 @@ def test_bad_bench_settings_are_refused_by_name(settings, message):
 
 
 def test_device_check_agreement_runs(tmp_path):
-    """experiments/device_check.py, the check prepared for a GPU machine, runs
+    """experiments/tools/device_check.py, the check prepared for a GPU machine, runs
     as written; here its default device is the CPU, so the two sides agree
     exactly."""
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "experiments" / "device_check.py"
+    path = Path(__file__).resolve().parents[1] / "experiments" / "tools" / "device_check.py"
     spec = importlib.util.spec_from_file_location("device_check", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

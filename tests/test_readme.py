@@ -1,30 +1,254 @@
-"""The README's Python examples run as written."""
+"""The documentation is true: every Python example of README.md and docs/*.md
+runs as written and gives what its text says, every ``nsga-jax`` command shown
+parses with the current options, and every link and path it names exists."""
+
+from __future__ import annotations
 
 import math
 import re
+import shlex
+from dataclasses import dataclass
 from pathlib import Path
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+WRITTEN_ELSEWHERE = {"docs/own-model.md", "docs/reliability.md"}
+"""Pages the documentation links to that are written separately; a link to one
+is accepted while it does not exist yet (and checked once it does)."""
+
+SKIP = "<!-- example: not run -->"
+"""Put on the line before a ```python fence to keep that block out of the run
+(a fragment that cannot run alone)."""
 
 
-def run_example(heading: str) -> dict:
-    """Execute the first ``python`` block after ``heading``; return its namespace."""
-    text = README.read_text()
-    section = text[text.index(heading):]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
-    namespace: dict = {}
-    exec(compile(code, "README.md", "exec"), namespace)
-    return namespace
+@dataclass
+class Example:
+    page: Path
+    heading: str
+    code: str
+    output: str | None  # the ```text block right after the example, if any
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return (self.page.relative_to(ROOT).as_posix(), self.heading)
 
 
-def test_python_api_example_runs():
-    sol = run_example("## Python API")["sol"]
+def _blocks(text: str):
+    """(language, body, start offset, end offset) of every fenced block."""
+    for m in re.finditer(r"^```([\w-]*)\n(.*?)^```[ \t]*$", text, re.S | re.M):
+        yield m.group(1), m.group(2), m.start(), m.end()
+
+
+def _heading_before(text: str, offset: int) -> str:
+    headings = re.findall(r"^#+ .*$", text[:offset], re.M)
+    return headings[-1] if headings else ""
+
+
+def examples() -> list[Example]:
+    found = []
+    for page in PAGES:
+        text = page.read_text()
+        blocks = list(_blocks(text))
+        for i, (lang, body, start, end) in enumerate(blocks):
+            if lang != "python" or text[:start].rstrip().endswith(SKIP):
+                continue
+            output = None
+            if i + 1 < len(blocks) and blocks[i + 1][0] == "text" and not text[end:blocks[i + 1][2]].strip():
+                output = blocks[i + 1][1]
+            found.append(Example(page, _heading_before(text, start), body, output))
+    return found
+
+
+# ------------------------------------------------------------------ checks
+# What each example's variables should hold, by (page, heading of its section).
+# The test refuses an example without an entry here.
+
+def _readme_first_example(ns):
+    sol = ns["sol"]
+    assert sol.stats["failed_steps"] == 0
+    assert len(ns["hits"]) == 6
+    assert abs(sol.ts[ns["hits"][0]] - math.sqrt(2 * 1.0 / 9.81)) < 1e-3  # within one step of the exact impact
+
+
+def _python_api_simulate(ns):
+    sol = ns["sol"]
     assert sol.stats["failed_steps"] == 0
     assert "tip_force" in sol.observables
+    assert ns["model"].e == 0.8
 
 
-def test_gradient_example_runs():
-    grad = run_example("### Gradients through whole trajectories")["grads"]
+def _python_api_batches(ns):
+    assert [s.n_steps for s in ns["sols"]] == [1500, 750, 375]
+    assert all(s.stats["failed_steps"] == 0 for s in ns["sols"])
+
+
+def _python_api_model(ns):
+    sol = ns["sol"]
+    assert sol.stats["failed_steps"] == 0
+    assert sol.q.min() >= -0.05 - 1e-12  # the stop holds
+    assert abs(sol.ts[ns["hits"][0]] - math.asin(0.5) / 10) < 1e-3
+
+
+def _gradients(ns):
+    grad = ns["grads"]
     assert set(grad) == {"E", "e", "velocity"}
     assert all(math.isfinite(float(g)) for g in grad.values())
     assert float(grad["velocity"]) != 0.0 and float(grad["E"]) != 0.0
+
+
+def _sweep(ns):
+    result = ns["result"]
+    errors = result.column("error_z")
+    assert len(errors) == 6 and np.all(np.isfinite(errors)) and np.all(np.asarray(errors) < 0.1)
+    assert (Path("ball_sweep") / "sweep.csv").exists()
+
+
+CHECKS = {
+    ("README.md", "## A first example"): _readme_first_example,
+    ("docs/python-api.md", "## Running a model: `simulate`"): _python_api_simulate,
+    ("docs/python-api.md", "## Batches"): _python_api_batches,
+    ("docs/python-api.md", "## Writing a model"): _python_api_model,
+    ("docs/gradients.md", "## Gradients through whole trajectories"): _gradients,
+    ("docs/sweeps-and-devices.md", "## Sweeps"): _sweep,
+}
+
+EXAMPLES = examples()
+
+
+def test_every_example_has_a_check_and_every_check_an_example():
+    keys = [e.key for e in EXAMPLES]
+    assert len(keys) == len(set(keys)), "one example per section, so that each has its own check"
+    assert set(keys) == set(CHECKS), (set(keys) ^ set(CHECKS))
+    assert ("README.md", "## A first example") in keys
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("example", EXAMPLES, ids=[f"{e.key[0]}: {e.key[1].lstrip('# ')}" for e in EXAMPLES])
+def test_example_runs_as_written(example, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # examples that write files write them here
+    namespace: dict = {"__name__": "__example__"}
+    exec(compile(example.code, str(example.page), "exec", dont_inherit=True), namespace)
+    printed = capsys.readouterr().out
+    if example.output is not None:
+        assert printed == example.output, "the output shown under the example is what it prints"
+    CHECKS[example.key](namespace)
+
+
+# ---------------------------------------------------------- shell commands
+
+def _shell_commands(text: str) -> list[list[str]]:
+    """Every ``nsga-jax ...`` command line of the bash and console blocks."""
+    commands = []
+    for lang, body, _, _ in _blocks(text):
+        if lang not in ("bash", "console", "sh"):
+            continue
+        joined = re.sub(r"\\\n\s*", " ", body)
+        for line in joined.splitlines():
+            line = line.strip()
+            if lang == "console":
+                if not line.startswith("$ "):
+                    continue
+                line = line[2:]
+            words = shlex.split(line, comments=True)
+            while words and re.match(r"^[A-Z_]+=", words[0]):  # environment variables
+                words = words[1:]
+            if "&&" in words:
+                words = words[words.index("&&") + 1:]
+            if words and words[0] == "nsga-jax":
+                commands.append(words[1:])
+    return commands
+
+
+COMMANDS = [(page.relative_to(ROOT).as_posix(), words) for page in PAGES for words in _shell_commands(page.read_text())]
+
+
+def test_the_pages_show_commands():
+    assert len(COMMANDS) > 20
+    assert ("README.md", ["run", "impacting_bar"]) in COMMANDS
+
+
+@pytest.mark.parametrize("page, words", COMMANDS, ids=[f"{p}: nsga-jax {' '.join(w)}"[:100] for p, w in COMMANDS])
+def test_command_parses_with_the_current_options(page, words):
+    from nsga_jax.cli import _parser
+    from nsga_jax.scenes import load_scene, parse_override
+
+    args = _parser().parse_args(words)  # an unknown option exits with status 2
+    scene = getattr(args, "scene", None)
+    if scene is None or args.command == "config":
+        return
+    path = ROOT / scene
+    if scene.endswith(".toml"):
+        if not path.exists():
+            pytest.skip(f"{scene} is a file the page tells the reader to write")
+        scene = path
+    overrides = dict(parse_override(s) for s in getattr(args, "set", []))
+    if args.command == "run":
+        for key in ("h", "t_end", "rho_inf", "scheme", "dtype", "record_every"):
+            if getattr(args, key, None) is not None:
+                overrides[key] = getattr(args, key)
+    load_scene(scene, overrides)  # unknown keys and values out of range raise ConfigError
+
+
+# ------------------------------------------------------- links and paths
+
+def _anchors(text: str) -> set[str]:
+    """The anchors a git forge gives the headings of a Markdown page."""
+    anchors, seen = set(), {}
+    in_code = False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            in_code = not in_code
+        if in_code or not re.match(r"^#+ ", line):
+            continue
+        title = re.sub(r"[`*]", "", line.lstrip("#").strip()).lower()
+        slug = re.sub(r"[^\w\- ]", "", title).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        anchors.add(slug if n == 0 else f"{slug}-{n}")
+    return anchors
+
+
+def _links(page: Path):
+    text = page.read_text()
+    text = re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)  # not in code blocks
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if not re.match(r"^[a-z]+:", target):
+            yield target
+
+
+LINKS = [(page.relative_to(ROOT).as_posix(), target) for page in PAGES for target in _links(page)]
+
+
+@pytest.mark.parametrize("page, target", LINKS, ids=[f"{p} -> {t}" for p, t in LINKS])
+def test_relative_link_resolves(page, target):
+    path, _, anchor = target.partition("#")
+    source = ROOT / page
+    dest = (source.parent / path).resolve() if path else source
+    rel = dest.relative_to(ROOT).as_posix() if dest.is_relative_to(ROOT) else str(dest)
+    if not dest.exists():
+        assert rel in WRITTEN_ELSEWHERE, f"{target} does not exist"
+        return
+    if anchor:
+        assert anchor in _anchors(dest.read_text()), f"no heading #{anchor} in {rel}"
+
+
+def test_every_page_of_docs_is_in_the_index():
+    index = (ROOT / "docs" / "README.md").read_text()
+    for page in (ROOT / "docs").glob("*.md"):
+        if page.name != "README.md":
+            assert f"]({page.name})" in index, page.name
+    for name in WRITTEN_ELSEWHERE:
+        assert f"]({Path(name).name})" in index
+
+
+def test_paths_named_in_the_pages_exist():
+    named = set()
+    for page in PAGES:
+        named |= set(re.findall(r"\b((?:experiments|configs|tests|nsga_jax|docs)/[\w./-]*\w\.(?:py|toml|md|csv|json|png))\b", page.read_text()))
+    assert named
+    missing = sorted(p for p in named if not (ROOT / p).exists() and p not in WRITTEN_ELSEWHERE)
+    assert not missing, missing
