@@ -12,7 +12,7 @@ and reshapes instead of a scatter-add: the same sums (a diagonal block
 receives exactly two contributions, and two-term sums do not depend on their
 order), in operations the compiler fuses. On the flexible pendulum a step
 took 33-37 µs against 46-62 with the scatter-add, for the same compile work
-(``experiments/compare_revisions.py``, 2-core CPU). (Vectors keep the gather
+(``experiments/tools/compare_revisions.py``, 2-core CPU). (Vectors keep the gather
 and the scatter: slicing them measured no faster.)
 """
 

@@ -7,7 +7,7 @@ axis), the initial state and the step size h. Their step counts differ with
 h; the time loop is a ``while_loop`` per chunk whose trip count is traced, so
 under ``vmap`` a member that has finished keeps its state while the others go
 on, and every member pays for the longest run's number of steps (batching
-over h pays when the step sizes are close; ``experiments/bench_batch_h.py``).
+over h pays when the step sizes are close; ``experiments/benchmarks/bench_batch_h.py``).
 
 With a device mesh (:func:`member_mesh`) the members are split over its
 devices by ``jax.shard_map``: each device runs its own members' loops with no

@@ -248,7 +248,7 @@ def _measure(scenes, batches, dtypes, scheme, repeats, max_steps, max_seconds, p
 
 
 def markdown(rows: list[dict]) -> str:
-    """The README's table of ``rows``."""
+    """The benchmark table of ``rows`` (Markdown, as docs/performance.md shows it)."""
     lines = ["| scene | n | h [s] | dtype | batch | µs/step | member-steps/s | × single | compile [s] "
              "| cached [s] | solves/step | dense factor+solve [µs] | float32 − float64 (eq. 52) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]

@@ -41,7 +41,8 @@ def _parser() -> argparse.ArgumentParser:
                              "with any h and parameter values, loads them instead of compiling)")
 
     run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=[cached])
-    run.add_argument("scene", help="scene name (see `nsga-jax scenes`) or path to a .toml config")
+    run.add_argument("scene", help="scene name (see `nsga-jax scenes`), a .toml config, or a .py file that registers "
+                                   "a scene (file.py:NAME picks one of several)")
     run.add_argument("--h", type=float, help="step size [s]")
     run.add_argument("--t-end", type=float, help="end time [s]")
     run.add_argument("--rho-inf", type=float, help="spectral radius at infinity, in [0, 1]")
@@ -77,7 +78,7 @@ def _parser() -> argparse.ArgumentParser:
     conv.add_argument("--observables", help="comma-separated observables (default: the scene's)")
     conv.add_argument("--mode", choices=("grouped", "padded", "separate"), default="grouped",
                       help="how the step sizes run: vmap over groups of similar step counts (default), one "
-                           "padded vmap, or separate runs (see experiments/bench_batch_h.py)")
+                           "padded vmap, or separate runs (see experiments/benchmarks/bench_batch_h.py)")
     conv.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_convergence)")
 
     ident = sub.add_parser("identify", help="fit scene parameters to measured (or synthetic) motion by "
@@ -453,10 +454,15 @@ def _scenes() -> int:
 
 def _config(args) -> int:
     from .scenes import REGISTRY
+    from .scenes.base import resolve_scene
 
-    if args.scene not in REGISTRY:
-        raise ConfigError(f"unknown scene {args.scene!r}; built-in scenes: {', '.join(sorted(REGISTRY))}")
-    print(REGISTRY[args.scene].default_toml(), end="")
+    name, path = resolve_scene(args.scene)
+    if path is not None:
+        raise ConfigError(f"config takes a scene name or a .py scene file, got the config file {args.scene!r}")
+    text = REGISTRY[name].default_toml()
+    if name != str(args.scene):  # a scene file: the config names the file
+        text = text.replace(f'scene = "{name}"', f'scene = "{args.scene}"', 1)
+    print(text, end="")
     return 0
 
 

@@ -2,7 +2,7 @@
 
 A run's programs depend on the model's structure, the scheme and the
 precision, never on h or on parameter values (they are traced). The first run
-of a structure compiles them (seconds, see the README's benchmark table); with
+of a structure compiles them (seconds, see docs/performance.md); with
 the cache on, every later run of that structure, in any process, loads them
 from disk instead. This is JAX's own persistent cache
 (``jax_compilation_cache_dir``), pointed at a folder of ours. A scene's

@@ -1,6 +1,7 @@
 """A batch on one CPU device against the same batch split over N forced host devices.
 
-    python experiments/benchmarks/bench_cpu_devices.py [--scenes a,b] [--batch 64] [--devices 2] [--rounds 2] [--timeout 300]
+    python experiments/benchmarks/bench_cpu_devices.py [--scenes a,b] [--batch 64] [--devices 2]
+        [--rounds 2] [--timeout 300]
 
 For each scene's ``nsga-jax bench`` case (float64), a batch of identical
 members runs in a fresh process with one CPU device and in one with

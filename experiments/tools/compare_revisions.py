@@ -1,6 +1,7 @@
 """A scene's per-step time and compile work at two git revisions, interleaved.
 
-    python experiments/tools/compare_revisions.py BASE [HEAD] --scene flexible_pendulum [--pairs 4] [--batch 64] [--cpus 1]
+    python experiments/tools/compare_revisions.py BASE [HEAD] --scene flexible_pendulum [--pairs 4]
+        [--batch 64] [--cpus 1]
 
 Each revision is checked out into a temporary worktree and run in its own
 process, alternately (BASE, HEAD, BASE, HEAD, ...), so that the slow and fast

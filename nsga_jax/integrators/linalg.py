@@ -42,7 +42,7 @@ LAPACK_WORK_PER_CALL = 2**15
 LU was seen to run on its calling thread. It split batches of 2.2e5 and more
 over its thread pool (128 matrices of 12 × 12, 16 of 27 × 27), and none of
 1.6e5 or less (8 of 27 × 27, 32 of 16 × 16;
-``experiments/lapack_batch_threads.py``)."""
+``experiments/tools/lapack_batch_threads.py``)."""
 
 _BOUNDED = contextvars.ContextVar("nsga_jax_bounded_lapack_batches", default=False)
 
@@ -144,7 +144,7 @@ class Tridiagonal(eqx.Module):
     x_I = y - A_II^{-1} A_IS x_S (two columns of each block inverse): about
     p s² + p² ≈ 2 n^{1.5} multiply-adds, where the dense inverse takes n².
     For the 201-node bar one solve costs about a third of LAPACK's
-    tridiagonal elimination (``experiments/bench_tridiagonal.py``).
+    tridiagonal elimination (``experiments/benchmarks/bench_tridiagonal.py``).
 
     Block elimination does not pivot: the diagonal blocks and Σ must be
     non-singular, which holds for the symmetric positive definite (and the

@@ -8,7 +8,8 @@ from . import (  # noqa: F401  (registration)
     rigid_box,
     rigid_pendulum,
 )
-from .base import REGISTRY, Scene, SceneSpec, load_scene, parametrize, parse_override
+from .base import REGISTRY, Scene, SceneSpec, configure, load_scene, parametrize, parse_override, register
 from .params import SOLVER_PARAMS, Param
 
-__all__ = ["REGISTRY", "Scene", "SceneSpec", "load_scene", "parametrize", "parse_override", "Param", "SOLVER_PARAMS"]
+__all__ = ["REGISTRY", "Scene", "SceneSpec", "configure", "load_scene", "parametrize", "parse_override", "register",
+           "Param", "SOLVER_PARAMS"]
