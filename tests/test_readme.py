@@ -248,7 +248,8 @@ def test_every_page_of_docs_is_in_the_index():
 def test_paths_named_in_the_pages_exist():
     named = set()
     for page in PAGES:
-        named |= set(re.findall(r"\b((?:experiments|configs|tests|nsga_jax|docs)/[\w./-]*\w\.(?:py|toml|md|csv|json|png))\b", page.read_text()))
+        pattern = r"\b((?:experiments|configs|tests|nsga_jax|docs)/[\w./-]*\w\.(?:py|toml|md|csv|json|png))\b"
+        named |= set(re.findall(pattern, page.read_text()))
     assert named
     missing = sorted(p for p in named if not (ROOT / p).exists() and p not in WRITTEN_ELSEWHERE)
     assert not missing, missing
