@@ -49,6 +49,7 @@ _LAZY = {
     "Trajectory": ".trajectory",
     "trajectory": ".trajectory",
     "Tolerances": ".monitors",
+    "InvariantWarning": "._simulate",
 }
 _MODULES = ("scenes",)
 
@@ -88,6 +89,7 @@ __all__ = [
     "ConfigError",
     "ConvergenceError",
     "InvariantError",
+    "InvariantWarning",
     "Solution",
     "simulate",
     "scenes",
