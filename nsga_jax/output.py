@@ -135,28 +135,26 @@ def plot_iterations(sol: Solution, path: Path, scene: str = "", *, scheme: str =
     """``iterations.png``: the Newton iterations (linear solves) of each step,
     as stairs over the step's time interval, one panel per sub-problem (smooth
     motion, position correction, velocity jump), integer ticks; failed steps
-    are marked with red crosses."""
+    are red crosses along the top of each panel."""
     it = np.asarray(sol.iterations)
-    edges = np.asarray(sol.ts)
     failed = _failure_times(sol)
     top = max(1, int(it[1:].max(initial=0)))
     with plotting.style():
         fig, axes = plotting.figure(3, 1, panel=(7.0, 1.45), sharex=True, sharey=True)
         for i, (ax, name) in enumerate(zip(axes[:, 0], plotting.SUBPROBLEMS)):
             counts = it[1:, i]
-            ax.stairs(counts, edges, baseline=None, lw=1.0, label=name)
+            ax.stairs(counts, np.asarray(sol.ts), baseline=None, lw=1.0)
             mean = float(counts.mean()) if counts.size else 0.0
             ax.set_title(f"{name}: mean {mean:.3g}, max {int(counts.max(initial=0))}", loc="left")
             ax.set_ylabel("iterations")
             if failed.size:
-                ax.plot(failed, np.full(failed.size, top + 0.5), "x", color="r", ms=6, mew=1.5,
-                        label="failed step")
-                ax.legend(loc="upper right")
+                ax.plot(failed, np.full(failed.size, 0.97), "x", color="r", ms=6, mew=1.5, clip_on=False,
+                        transform=ax.get_xaxis_transform(), label="failed step")
             plotting.integer_ticks(ax, top=top)
-        axes[0, 0].set_ylim(-0.3, top + 0.9)
+        axes[0, 0].set_ylim(-0.03 * top - 0.2, 1.1 * top + 0.8)
         plotting.plain_ticks(axes[0, 0], "x")
         axes[-1, 0].set_xlabel("t [s]")
-        more = f", {failed.size} failed" if failed.size else ""
+        more = f", {failed.size} failed: red crosses" if failed.size else ""
         fig.suptitle(plotting.title(scene, scheme, sol.h,
                                     f"Newton iterations (linear solves) per step ({sol.n_steps} steps{more})"))
     return plotting.save(fig, path)

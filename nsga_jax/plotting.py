@@ -210,7 +210,8 @@ def integer_ticks(ax, axis: str = "y", top: float | None = None) -> None:
     ``top`` of at most 6, else a few."""
     from matplotlib.ticker import MaxNLocator, MultipleLocator
 
-    locator = MultipleLocator(1) if top is not None and top <= 6 else MaxNLocator(integer=True, min_n_ticks=2)
+    locator = (MultipleLocator(1) if top is not None and top <= 6 else
+               MaxNLocator(integer=True, steps=[1, 2, 5, 10], min_n_ticks=2))
     getattr(ax, f"{axis}axis").set_major_locator(locator)
 
 
