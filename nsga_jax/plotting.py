@@ -279,6 +279,18 @@ def bottom_labels(axes, text: str) -> None:
             ax.tick_params(labelbottom=True)
 
 
+def figure_legend(fig, axes):
+    """One legend for the figure, right of the panels (never over data): the
+    labelled lines of every panel, each label once. ``None`` if none."""
+    handles: dict[str, Any] = {}
+    for ax in np.ravel(axes):
+        for handle, text in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(text, handle)
+    if not handles:
+        return None
+    return fig.legend(list(handles.values()), list(handles), loc="outside right upper")
+
+
 def hide_unused(axes, used: int) -> None:
     """Hide the panels after the first ``used``."""
     for ax in list(axes.flat)[used:]:
@@ -392,12 +404,7 @@ def sweep_figure(result, columns: Sequence[str], scene=None, scheme: str = ""):
             ax.set_xlabel(label(x_name, parameter_unit(spec, x_name)))
             ax.set_ylabel(column_label(col, spec))
         hide_unused(axes, len(columns))
-        handles = {}
-        for ax in axes.flat[: len(columns)]:
-            for handle, text in zip(*ax.get_legend_handles_labels()):
-                handles.setdefault(text, handle)
-        if handles:
-            fig.legend(list(handles.values()), list(handles), loc="outside right upper")
+        figure_legend(fig, axes.flat[: len(columns)])
         varying = [k for k, v in values.items() if np.unique(v).size > 1]
         what = f"sweep over {', '.join(varying) or x_name} ({len(result.rows)} runs"
         what += ")" if joined else f"; markers only: {len(keys)} combinations)"
@@ -409,4 +416,4 @@ def sweep_figure(result, columns: Sequence[str], scene=None, scheme: str = ""):
 __all__ = ["STYLE", "SCHEME_STYLE", "SUBPROBLEMS", "MAX_LINES", "style", "figure", "save", "capture",
            "scene_spec", "observable_unit", "parameter_unit", "unit_text", "label", "h_text", "title",
            "scheme_style", "integer_ticks", "log_ticks", "plain_ticks", "flat_limits", "bottom_labels",
-           "hide_unused", "column_label", "sweep_groups", "sweep_axis", "sweep_figure"]
+           "figure_legend", "hide_unused", "column_label", "sweep_groups", "sweep_axis", "sweep_figure"]

@@ -208,66 +208,65 @@ def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Refe
     order = slopes(rows)
     styles = {s: plotting.scheme_style(s, i) for i, s in enumerate(schemes)}
     hs = sorted({r.h for r in rows})
-    ncols = max(1, len(names))
+    ncols = min(2, max(1, len(names)))
+    nrows = -(-max(1, len(names)) // ncols)
 
     def heading(what: str) -> str:
         return plotting.title(title, schemes, hs, what)
 
-    def mark_failures(ax, points) -> None:
-        """Red crosses at the bottom of the axes for failed runs (no error)."""
-        for k, (s, xs) in enumerate(points.items()):
-            ax.plot(xs, [0.0] * len(xs), "x", color="r", ms=8 - 1.5 * k, mew=1.6,
-                    transform=ax.get_xaxis_transform(), clip_on=False, label=f"{s.upper()} failed")
+    def mark_failures(ax, stat=None) -> None:
+        """Red crosses for failed runs: at the value ``stat`` of the linear
+        solves, else (no error to show) along the bottom of the axes."""
+        for k, s in enumerate(schemes):
+            bad = [r for r in rows if r.scheme == s and r.failed_steps]
+            if bad:
+                y = [r.iterations["linear_solves"][stat] for r in bad] if stat else [0.0] * len(bad)
+                ax.plot([r.h for r in bad], y, "x", color="r", ms=9 - 1.5 * k, mew=1.6, clip_on=False,
+                        transform=ax.transData if stat else ax.get_xaxis_transform(), label=f"{s.upper()} failed")
 
     with plotting.style():
-        fig, axes = plotting.figure(1, ncols, panel=(4.0, 3.4))
-        for ax, k in zip(axes[0], names):
-            fails = {}
+        fig, axes = plotting.figure(nrows, ncols, panel=(4.2, 3.2))
+        for ax, k in zip(axes.flat, names):
             for s in schemes:
                 pts = [(r.h, r.errors[k]) for r in rows if r.scheme == s and np.isfinite(r.errors[k])]
                 if pts:
-                    label = f"{s.upper()} (order {order[(s, k)]:.2f})" if (s, k) in order else s.upper()
-                    ax.loglog(*zip(*sorted(pts)), label=label, **styles[s])
-                bad = [r.h for r in rows if r.scheme == s and r.failed_steps]
-                if bad:
-                    fails[s] = bad
-            mark_failures(ax, fails)
+                    ax.loglog(*zip(*sorted(pts)), label=s.upper(), **styles[s])
+            mark_failures(ax)
             ax.set_xscale("log")
             plotting.log_ticks(ax, "x", hs)
             plotting.log_ticks(ax, "y")
             ax.set_xlabel("h [s]")
             ax.set_ylabel(plotting.label(f"error of {k} (eq. 52)", ""))
-            ax.legend(loc="best")
+            fitted = ", ".join(f"{s.upper()} {order[(s, k)]:.2f}" for s in schemes if (s, k) in order)
+            ax.set_title(f"observed order: {fitted}" if fitted else "no observed order", loc="left")
+        plotting.hide_unused(axes, len(names))
+        plotting.figure_legend(fig, axes)
         fig.suptitle(heading(f"convergence against the {reference.description}"))
     paths["convergence"] = plotting.save(fig, out_dir / "convergence.png")
 
+    top = max(r.iterations["linear_solves"]["max"] for r in rows)
     with plotting.style():
-        fig, axes = plotting.figure(1, 2, panel=(4.0, 3.4))
-        for s in schemes:
-            mine = sorted((r for r in rows if r.scheme == s), key=lambda r: r.h)
-            for ax, stat in zip(axes[0], ("mean", "max")):
+        fig, axes = plotting.figure(1, 2, panel=(4.2, 3.2))
+        for ax, stat in zip(axes[0], ("mean", "max")):
+            for s in schemes:
+                mine = sorted((r for r in rows if r.scheme == s), key=lambda r: r.h)
                 ax.plot([r.h for r in mine], [r.iterations["linear_solves"][stat] for r in mine],
                         label=s.upper(), **styles[s])
-                bad = [(r.h, r.iterations["linear_solves"][stat]) for r in mine if r.failed_steps]
-                if bad:
-                    ax.plot(*zip(*bad), "x", color="r", ms=10, mew=2, label=f"{s.upper()} failed")
-        for ax, stat in zip(axes[0], ("mean", "max")):
+            mark_failures(ax, stat)
             ax.set_xscale("log")
             plotting.log_ticks(ax, "x", hs)
             ax.set_xlabel("h [s]")
             ax.set_ylabel(f"{stat} linear solves per step")
-            ax.legend(loc="best")
-        top = max(r.iterations["linear_solves"]["max"] for r in rows)
-        for ax in axes[0]:
-            ax.set_ylim(0.0, top + 0.5)
+            ax.set_ylim(0.0, 1.05 * top + 0.5)
         plotting.integer_ticks(axes[0, 1], top=top)
+        plotting.figure_legend(fig, axes)
         fig.suptitle(heading("Newton iterations (linear solves) per step"))
     paths["iterations"] = plotting.save(fig, out_dir / "iterations.png")
 
     shared = any(r.batch_size > 1 for r in rows)
     with plotting.style():
-        fig, axes = plotting.figure(1, ncols, panel=(4.0, 3.4))
-        for ax, k in zip(axes[0], names):
+        fig, axes = plotting.figure(nrows, ncols, panel=(4.2, 3.2))
+        for ax, k in zip(axes.flat, names):
             for s in schemes:
                 mine = sorted((r for r in rows if r.scheme == s and np.isfinite(r.errors[k])), key=lambda r: -r.h)
                 if mine:  # joined in the order of decreasing h (increasing work)
@@ -277,7 +276,8 @@ def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Refe
             plotting.log_ticks(ax, "y")
             ax.set_xlabel("wall time, compile excluded [s]")
             ax.set_ylabel(plotting.label(f"error of {k} (eq. 52)", ""))
-            ax.legend(loc="best")
+        plotting.hide_unused(axes, len(names))
+        plotting.figure_legend(fig, axes)
         note = " (batched runs share their batch's wall time)" if shared else ""
         fig.suptitle(heading(f"error against run time{note}"))
     paths["work_precision"] = plotting.save(fig, out_dir / "work_precision.png")
