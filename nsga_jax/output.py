@@ -20,6 +20,7 @@ import numpy as np
 from . import plotting
 from ._simulate import Solution
 from .integrators.base import StepOutput
+from .results import ConfigError
 
 RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bilateral_rate",
                  "iterations", "residual", "result")
@@ -94,7 +95,8 @@ def plot_observables(sol: Solution, path: Path, scene: str = "", *, scheme: str 
                      names: list[str] | tuple[str, ...] | None = None) -> Path:
     """``observables.png``: one panel per observable against t [s], each
     labelled with its unit (:attr:`SceneSpec.units
-    <nsga_jax.scenes.base.SceneSpec.units>`); failed steps are marked.
+    <nsga_jax.scenes.base.SceneSpec.units>`); a red line marks the first
+    failed step.
 
     Args:
         sol: the run.
@@ -108,8 +110,8 @@ def plot_observables(sol: Solution, path: Path, scene: str = "", *, scheme: str 
     names = default_observables(sol, scene) if names is None else list(names)
     unknown = [k for k in names if k not in scalar]
     if unknown or not names:
-        raise ValueError(f"cannot plot {unknown[0] if unknown else 'no observable'!r}; "
-                         f"scalar observables: {', '.join(scalar)}")
+        raise ConfigError(f"cannot plot {unknown[0] if unknown else 'no observable'!r}; "
+                          f"scalar observables: {', '.join(scalar)}")
     ncols = 2 if len(names) > 1 else 1
     nrows = -(-len(names) // ncols)
     failed = _failure_times(sol)
@@ -124,9 +126,7 @@ def plot_observables(sol: Solution, path: Path, scene: str = "", *, scheme: str 
                 ax.axvline(t, color="r", ls="--", lw=0.8, label="first failed step")
         plotting.hide_unused(axes, len(names))
         plotting.bottom_labels(axes, "t [s]")
-        if failed.size:
-            axes[0, 0].legend(loc="best")
-        more = f", {failed.size} failed steps" if failed.size else ""
+        more = f", {failed.size} failed steps from the red line" if failed.size else ""
         fig.suptitle(plotting.title(scene, scheme, sol.h, f"observables ({sol.n_steps} steps{more})"))
     return plotting.save(fig, path)
 

@@ -354,10 +354,10 @@ def _value_text(scene, name: str, value: float) -> str:
 
 
 def _group_style(j: int) -> dict:
-    """The j-th line of a sweep panel: its own marker and line style, hollow
-    and larger first, so that lines lying on each other stay visible."""
-    return dict(marker="osD^v<>p"[j % 8], markersize=max(3.0, 7.0 - 0.6 * j), linestyle=("-", "--", ":", "-.")[j % 4],
-                markerfacecolor="none" if j % 2 == 0 else None, alpha=0.9)
+    """The j-th line of a sweep panel: its own hollow marker, smaller for
+    each line, and line style, so that lines lying on each other stay visible."""
+    return dict(marker="osD^v<>p"[j % 8], markersize=max(3.0, 7.5 - 0.7 * j), markerfacecolor="none",
+                linestyle=("-", "--", ":", "-.")[j % 4], alpha=0.9)
 
 
 def sweep_figure(result, columns: Sequence[str], scene=None, scheme: str = ""):
@@ -389,7 +389,8 @@ def sweep_figure(result, columns: Sequence[str], scene=None, scheme: str = ""):
                     text = ", ".join(_value_text(spec, k, v) for k, v in zip(others, key))
                     ax.plot(x[sel][order], y[sel][order], label=text or "_run", gid="group", **_group_style(j))
             else:
-                ax.plot(x, y, "o", ms=3, alpha=0.6, label=f"{len(keys)} combinations of {', '.join(others)}",
+                spread = [k for k in others if np.unique(values[k]).size > 1]
+                ax.plot(x, y, "o", ms=3, alpha=0.6, label=f"{len(keys)} combinations of {', '.join(spread)}",
                         gid="group")
             bad = failed & np.isfinite(y)
             if bad.any():

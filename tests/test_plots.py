@@ -112,6 +112,9 @@ def test_failed_steps_are_marked(tmp_path):
         (crosses,) = [line for line in ax.lines if line.get_label() == "failed step"]
         np.testing.assert_allclose(crosses.get_xdata(), [50 * sol.h, 51 * sol.h])
     assert "2 failed steps" in obs.get_suptitle()
+    for ax in visible_axes(obs):
+        (line,) = [line for line in ax.lines if line.get_label() == "first failed step"]
+        assert line.get_xdata()[0] == pytest.approx(50 * sol.h)
 
 
 @pytest.mark.parametrize("name", ["rigid_box", "flexible_cube", "flexible_pendulum"])
@@ -125,7 +128,7 @@ def test_many_observables_default_to_a_readable_selection(name, tmp_path):
     check_figure(default, name, "DS")
     assert 4 <= len(visible_axes(default)) <= 9
     assert [ax.get_ylabel() for ax in visible_axes(chosen)] == ["energy [J]"]
-    with pytest.raises(ValueError, match="nope"):
+    with pytest.raises(nsga_jax.ConfigError, match="nope"):
         plot_observables(sol, tmp_path / "c.png", name, names=["nope"])
 
 
