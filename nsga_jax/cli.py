@@ -353,7 +353,7 @@ def _identify(args) -> int:
     result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
                       progress=True, max_steps=args.max_steps, learning_rate=args.learning_rate, true=true,
                       adjoint=args.adjoint)
-    paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}")
+    paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}", scene=scene)
     for k in names:
         line = f"{k}: initial {result.initial[k]:.6g} -> recovered {result.recovered[k]:.6g}"
         if true is not None:

@@ -389,41 +389,53 @@ def _to_values(u, scale) -> dict[str, float]:
     return {k: float(u[k]) * scale[k] for k in u}
 
 
-def write_identification(result: Identification, data: Data, out_dir, title: str = "") -> dict[str, Path]:
+def write_identification(result: Identification, data: Data, out_dir, title: str = "", *,
+                         scene=None) -> dict[str, Path]:
     """Write ``identification.json``, ``loss.png`` (loss per iteration) and
-    ``fit.png`` (data, initial and fitted observables); returns the paths."""
-    import matplotlib
+    ``fit.png`` (data, initial and fitted observables against t [s]); returns
+    the paths.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    ``scene`` (the :class:`~nsga_jax.scenes.base.Scene` that was fitted, or a
+    scene name) gives the observables' units and the figures' titles (scene,
+    scheme, h); ``title`` replaces the default second line of the titles
+    (``identification of ...``)."""
+    from . import plotting
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "identification.json", "loss": out / "loss.png", "fit": out / "fit.png"}
     paths["json"].write_text(json.dumps(result.summary(), indent=2) + "\n")
+    solver = getattr(scene, "solver", None) or {}
+    spec = plotting.scene_spec(scene)
+    found = ", ".join(f"{k}: {result.initial[k]:.4g} → {result.recovered[k]:.4g}"
+                      + (f" (true {result.true[k]:.4g})" if result.true else "") for k in result.names)
+    what = title or f"identification of {found}"
+    heading = plotting.title(spec.name if spec is not None else "", solver.get("scheme", ""),
+                             solver["h"] if "h" in solver else (), what)
 
-    fig, ax = plt.subplots(figsize=(5, 3.5))
-    ax.semilogy(np.arange(len(result.losses)), np.maximum(result.losses, 1e-300), "o-", ms=3)
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("loss (normalised mean square)")
-    ax.set_title(title or "identification")
-    ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(paths["loss"], dpi=120)
-    plt.close(fig)
+    with plotting.style():
+        fig, axes = plotting.figure(1, 1, panel=(5.6, 3.4))
+        ax = axes[0, 0]
+        ax.semilogy(np.arange(len(result.losses)), np.maximum(result.losses, 1e-300), "o-", ms=3)
+        ax.set_xlabel("iteration")
+        ax.set_ylabel(plotting.label("loss (normalised mean square)", ""))
+        plotting.integer_ticks(ax, "x", top=len(result.losses) - 1)
+        plotting.log_ticks(ax, "y")
+        fig.suptitle(f"{heading}\n{result.iterations} iterations, {result.evaluations} evaluations, "
+                     f"stopped by {result.stop}")
+    paths["loss"] = plotting.save(fig, paths["loss"])
 
     names = list(data.values)
-    fig, axes = plt.subplots(len(names), 1, figsize=(7, 2.6 * len(names)), sharex=True, squeeze=False)
-    for ax, k in zip(axes[:, 0], names):
-        ax.plot(data.t, data.values[k], ".", ms=3, color="0.5", label="data")
-        ax.plot(data.t, result.initial_fit[k], "--", lw=1, label="initial")
-        ax.plot(data.t, result.fitted[k], "-", lw=1.2, label="fitted")
-        ax.set_ylabel(k)
-        ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="best", fontsize=8)
-    axes[0, 0].set_title(title or "fit")
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
-    fig.savefig(paths["fit"], dpi=120)
-    plt.close(fig)
+    with plotting.style():
+        fig, axes = plotting.figure(len(names), 1, panel=(7.0, 2.3), sharex=True)
+        for ax, k in zip(axes[:, 0], names):
+            ax.plot(data.t, data.values[k], ".", ms=3, color="0.5", label="data")
+            ax.plot(data.t, result.initial_fit[k], "--", lw=1, label="initial")
+            ax.plot(data.t, result.fitted[k], "-", lw=1.2, label="fitted")
+            ax.set_ylabel(plotting.label(k, plotting.observable_unit(spec, k)))
+            plotting.plain_ticks(ax, "x")
+        axes[0, 0].legend(loc="best")
+        axes[-1, 0].set_xlabel("t [s]")
+        fig.suptitle(heading)
+    paths["fit"] = plotting.save(fig, paths["fit"])
     return paths

@@ -15,14 +15,12 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ._simulate import Solution  # noqa: E402
-from .integrators.base import StepOutput  # noqa: E402
+from . import plotting
+from ._simulate import Solution
+from .integrators.base import StepOutput
+from .results import ConfigError
 
 RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bilateral_rate",
                  "iterations", "residual", "result")
@@ -65,9 +63,10 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, P
     np.savez_compressed(paths["trajectory"], **arrays)
     paths["summary"] = out_dir / "summary.json"
     paths["summary"].write_text(json.dumps(info, indent=2) + "\n")
-    if sol.observables:
-        paths["observables_plot"] = plot_observables(sol, out_dir / "observables.png", info.get("scene", ""))
-    paths["iterations_plot"] = plot_iterations(sol, out_dir / "iterations.png")
+    scene, scheme = info.get("scene", ""), info.get("scheme", "")
+    if any(np.ndim(v) == 1 for v in sol.observables.values()):
+        paths["observables_plot"] = plot_observables(sol, out_dir / "observables.png", scene, scheme=scheme)
+    paths["iterations_plot"] = plot_iterations(sol, out_dir / "iterations.png", scene, scheme=scheme)
     partial = out_dir / "partial"
     if len(sol.ts) == sol.n_steps + 1:  # every step is in trajectory.npz
         shutil.rmtree(partial, ignore_errors=True)
@@ -78,42 +77,87 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, P
     return paths
 
 
-def plot_observables(sol: Solution, path: Path, title: str = "") -> Path:
-    names = [k for k, v in sol.observables.items() if np.ndim(v) == 1]
+def default_observables(sol: Solution, scene=None) -> list[str]:
+    """The observables a run's plot shows: the scene's ``plotted`` selection
+    (:class:`~nsga_jax.scenes.base.SceneSpec`), else every scalar one."""
+    scalar = [k for k, v in sol.observables.items() if np.ndim(v) == 1]
+    spec = plotting.scene_spec(scene)
+    chosen = [k for k in (spec.plotted if spec is not None else ()) if k in scalar]
+    return chosen or scalar
+
+
+def _failure_times(sol: Solution) -> np.ndarray:
+    """Times [s] of the failed steps (step k ends at t0 + k h)."""
+    return sol.ts[0] + sol.failed_steps * sol.h
+
+
+def plot_observables(sol: Solution, path: Path, scene: str = "", *, scheme: str = "",
+                     names: list[str] | tuple[str, ...] | None = None) -> Path:
+    """``observables.png``: one panel per observable against t [s], each
+    labelled with its unit (:attr:`SceneSpec.units
+    <nsga_jax.scenes.base.SceneSpec.units>`); a red line marks the first
+    failed step.
+
+    Args:
+        sol: the run.
+        path: the PNG to write.
+        scene: the scene's name (units, default selection, title).
+        scheme: the scheme's name, for the title.
+        names: the scalar observables to show (default:
+            :func:`default_observables`, the scene's ``plotted`` selection).
+    """
+    scalar = [k for k, v in sol.observables.items() if np.ndim(v) == 1]
+    names = default_observables(sol, scene) if names is None else list(names)
+    unknown = [k for k in names if k not in scalar]
+    if unknown or not names:
+        raise ConfigError(f"cannot plot {unknown[0] if unknown else 'no observable'!r}; "
+                          f"scalar observables: {', '.join(scalar)}")
     ncols = 2 if len(names) > 1 else 1
     nrows = -(-len(names) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(6.0 * ncols, 2.3 * nrows), squeeze=False, sharex=True)
-    for ax, name in zip(axes.flat, names):
-        ax.plot(sol.ts, sol.observables[name], lw=1.0)
-        ax.set_ylabel(name)
-        ax.grid(alpha=0.3)
-    for ax in axes.flat[len(names):]:
-        ax.set_visible(False)
-    for ax in axes[-1]:
-        ax.set_xlabel("t [s]")
-    fig.suptitle(f"{title}  (h = {sol.h:g} s, {sol.n_steps} steps)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    failed = _failure_times(sol)
+    with plotting.style():
+        fig, axes = plotting.figure(nrows, ncols, panel=(4.2, 1.9), sharex=True)
+        for ax, name in zip(axes.flat, names):
+            ax.plot(sol.ts, sol.observables[name], lw=1.0)
+            ax.set_ylabel(plotting.label(name, plotting.observable_unit(scene, name)))
+            plotting.plain_ticks(ax, "x")
+            plotting.flat_limits(ax, sol.observables[name])
+            for t in failed[:1]:
+                ax.axvline(t, color="r", ls="--", lw=0.8, label="first failed step")
+        plotting.hide_unused(axes, len(names))
+        plotting.bottom_labels(axes, "t [s]")
+        more = f", {failed.size} failed steps from the red line" if failed.size else ""
+        fig.suptitle(plotting.title(scene, scheme, sol.h, f"observables ({sol.n_steps} steps{more})"))
+    return plotting.save(fig, path)
 
 
-def plot_iterations(sol: Solution, path: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(7.0, 3.0))
-    it = sol.iterations
-    for i, name in enumerate(("smooth", "position", "velocity")):
-        ax.step(sol.ts[1:], it[1:, i] + 0.06 * (i - 1), where="post", lw=1.0, label=name)
-    failed = sol.failed_steps
-    if failed.size:
-        ax.plot(sol.ts[failed], np.zeros(failed.size), "rx", label="failed step")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("Newton iterations")
-    ax.legend(loc="upper right", fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+def plot_iterations(sol: Solution, path: Path, scene: str = "", *, scheme: str = "") -> Path:
+    """``iterations.png``: the Newton iterations (linear solves) of each step,
+    as stairs over the step's time interval, one panel per sub-problem (smooth
+    motion, position correction, velocity jump), integer ticks; failed steps
+    are red crosses along the top of each panel."""
+    it = np.asarray(sol.iterations)
+    failed = _failure_times(sol)
+    top = max(1, int(it[1:].max(initial=0)))
+    with plotting.style():
+        fig, axes = plotting.figure(3, 1, panel=(7.0, 1.45), sharex=True, sharey=True)
+        for i, (ax, name) in enumerate(zip(axes[:, 0], plotting.SUBPROBLEMS)):
+            counts = it[1:, i]
+            ax.stairs(counts, np.asarray(sol.ts), baseline=None, lw=1.0)
+            mean = float(counts.mean()) if counts.size else 0.0
+            ax.set_title(f"{name}: mean {mean:.3g}, max {int(counts.max(initial=0))}", loc="left")
+            ax.set_ylabel("iterations")
+            if failed.size:
+                ax.plot(failed, np.full(failed.size, 0.97), "x", color="r", ms=6, mew=1.5, clip_on=False,
+                        transform=ax.get_xaxis_transform(), label="failed step")
+            plotting.integer_ticks(ax, top=top)
+        axes[0, 0].set_ylim(-0.03 * top - 0.2, 1.1 * top + 0.8)
+        plotting.plain_ticks(axes[0, 0], "x")
+        axes[-1, 0].set_xlabel("t [s]")
+        more = f", {failed.size} failed: red crosses" if failed.size else ""
+        fig.suptitle(plotting.title(scene, scheme, sol.h,
+                                    f"Newton iterations (linear solves) per step ({sol.n_steps} steps{more})"))
+    return plotting.save(fig, path)
 
 
 def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]:
@@ -126,4 +170,5 @@ def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-__all__ = ["chunk_writer", "write_run", "summary", "load_chunks", "plot_observables", "plot_iterations"]
+__all__ = ["chunk_writer", "write_run", "summary", "load_chunks", "plot_observables", "plot_iterations",
+           "default_observables"]

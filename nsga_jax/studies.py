@@ -15,19 +15,16 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ._simulate import Solution, simulate  # noqa: E402
-from .batch import simulate_batch  # noqa: E402
-from .metrics import observed_order, relative_l1_error  # noqa: E402
-from .results import ConfigError  # noqa: E402
-from .scenes.base import Scene, load_scene  # noqa: E402
-from .tables import write_csv  # noqa: E402
-from .validation import step_count  # noqa: E402
+from . import plotting
+from ._simulate import Solution, simulate
+from .batch import simulate_batch
+from .metrics import observed_order, relative_l1_error
+from .results import ConfigError
+from .scenes.base import Scene, load_scene
+from .tables import write_csv
+from .validation import step_count
 
 MODES = ("grouped", "padded", "separate")
 
@@ -210,7 +207,13 @@ def slopes(rows: list[StudyRow]) -> dict[tuple[str, str], float]:
 def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Reference) -> dict[str, Path]:
     """study.csv, convergence.png (error vs h with slopes), iterations.png (mean and
     max linear solves per step vs h, failures marked) and work_precision.png
-    (error vs wall time)."""
+    (error vs wall time [s], joined in the order of h). ``title`` names the
+    scene; every figure's title adds the schemes and the range of h [s].
+
+    Each scheme keeps one marker, line style and marker size in every plot
+    (:data:`~nsga_jax.plotting.SCHEME_STYLE`), so that schemes with identical
+    results (DS, DSn and CS often are) stay visible on top of each other.
+    Failed runs are red crosses at the bottom of the error axes."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out_dir / "study.csv"}
@@ -218,62 +221,79 @@ def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Refe
     schemes = list(dict.fromkeys(r.scheme for r in rows))
     names = list(rows[0].errors)
     order = slopes(rows)
-    markers = dict(zip(schemes, "osD^v<>"))
+    styles = {s: plotting.scheme_style(s, i) for i, s in enumerate(schemes)}
+    hs = sorted({r.h for r in rows})
+    ncols = min(2, max(1, len(names)))
+    nrows = -(-max(1, len(names)) // ncols)
 
-    fig, axes = plt.subplots(1, len(names), figsize=(4.6 * len(names), 3.8), squeeze=False)
-    for ax, k in zip(axes[0], names):
-        for s in schemes:
-            pts = [(r.h, r.errors[k]) for r in rows if r.scheme == s and np.isfinite(r.errors[k])]
-            if pts:
-                label = f"{s.upper()} (order {order[(s, k)]:.2f})" if (s, k) in order else s.upper()
-                ax.loglog(*zip(*pts), marker=markers[s], label=label)
-            fails = [r.h for r in rows if r.scheme == s and r.failed_steps]
-            if fails:
-                ax.plot(fails, [ax.get_ylim()[0] if pts else 1.0] * len(fails), "x", color="r", ms=9,
-                        label=f"{s.upper()} failed")
-        ax.set_xlabel("h [s]")
-        ax.set_ylabel(f"error of {k} (eq. 52)")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
-    fig.suptitle(f"{title}: convergence against {reference.description}")
-    fig.tight_layout()
-    paths["convergence"] = out_dir / "convergence.png"
-    fig.savefig(paths["convergence"], dpi=100)
-    plt.close(fig)
+    def heading(what: str) -> str:
+        return plotting.title(title, schemes, hs, what)
 
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
-    for s in schemes:
-        mine = [r for r in rows if r.scheme == s]
-        h = [r.h for r in mine]
-        for ax, stat in zip(axes, ("mean", "max")):
-            ax.semilogx(h, [r.iterations["linear_solves"][stat] for r in mine], marker=markers[s], label=s.upper())
-            bad = [(r.h, r.iterations["linear_solves"][stat]) for r in mine if r.failed_steps]
+    def mark_failures(ax, stat=None) -> None:
+        """Red crosses for failed runs: at the value ``stat`` of the linear
+        solves, else (no error to show) along the bottom of the axes."""
+        for k, s in enumerate(schemes):
+            bad = [r for r in rows if r.scheme == s and r.failed_steps]
             if bad:
-                ax.plot(*zip(*bad), "x", color="r", ms=10, mew=2, label=f"{s.upper()} failed")
-    for ax, stat in zip(axes, ("mean", "max")):
-        ax.set_xlabel("h [s]")
-        ax.set_ylabel(f"{stat} linear solves per step")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
-    fig.suptitle(f"{title}: Newton iterations (linear solves) per step")
-    fig.tight_layout()
-    paths["iterations"] = out_dir / "iterations.png"
-    fig.savefig(paths["iterations"], dpi=100)
-    plt.close(fig)
+                y = [r.iterations["linear_solves"][stat] for r in bad] if stat else [0.0] * len(bad)
+                ax.plot([r.h for r in bad], y, "x", color="r", ms=9 - 1.5 * k, mew=1.6, clip_on=False,
+                        transform=ax.transData if stat else ax.get_xaxis_transform(), label=f"{s.upper()} failed")
 
-    fig, axes = plt.subplots(1, len(names), figsize=(4.6 * len(names), 3.8), squeeze=False)
-    for ax, k in zip(axes[0], names):
-        for s in schemes:
-            pts = [(r.wall_time_s, r.errors[k]) for r in rows if r.scheme == s and np.isfinite(r.errors[k])]
-            if pts:
-                ax.loglog(*zip(*sorted(pts)), marker=markers[s], label=s.upper())
-        ax.set_xlabel("wall time [s] (compile excluded)")
-        ax.set_ylabel(f"error of {k} (eq. 52)")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
-    fig.suptitle(f"{title}: error against run time")
-    fig.tight_layout()
-    paths["work_precision"] = out_dir / "work_precision.png"
-    fig.savefig(paths["work_precision"], dpi=100)
-    plt.close(fig)
+    with plotting.style():
+        fig, axes = plotting.figure(nrows, ncols, panel=(4.2, 3.2))
+        for ax, k in zip(axes.flat, names):
+            for s in schemes:
+                pts = [(r.h, r.errors[k]) for r in rows if r.scheme == s and np.isfinite(r.errors[k])]
+                if pts:
+                    ax.loglog(*zip(*sorted(pts)), label=s.upper(), **styles[s])
+            mark_failures(ax)
+            ax.set_xscale("log")
+            plotting.log_ticks(ax, "x", hs)
+            plotting.log_ticks(ax, "y")
+            ax.set_xlabel("h [s]")
+            ax.set_ylabel(plotting.label(f"error of {k} (eq. 52)", ""))
+            fitted = ", ".join(f"{s.upper()} {order[(s, k)]:.2f}" for s in schemes if (s, k) in order)
+            ax.set_title(f"observed order: {fitted}" if fitted else "no observed order", loc="left")
+        plotting.hide_unused(axes, len(names))
+        plotting.figure_legend(fig, axes)
+        fig.suptitle(heading(f"convergence against the {reference.description}"))
+    paths["convergence"] = plotting.save(fig, out_dir / "convergence.png")
+
+    top = max(r.iterations["linear_solves"]["max"] for r in rows)
+    with plotting.style():
+        fig, axes = plotting.figure(1, 2, panel=(4.2, 3.2))
+        for ax, stat in zip(axes[0], ("mean", "max")):
+            for s in schemes:
+                mine = sorted((r for r in rows if r.scheme == s), key=lambda r: r.h)
+                ax.plot([r.h for r in mine], [r.iterations["linear_solves"][stat] for r in mine],
+                        label=s.upper(), **styles[s])
+            mark_failures(ax, stat)
+            ax.set_xscale("log")
+            plotting.log_ticks(ax, "x", hs)
+            ax.set_xlabel("h [s]")
+            ax.set_ylabel(f"{stat} linear solves per step")
+            ax.set_ylim(0.0, 1.05 * top + 0.5)
+        plotting.integer_ticks(axes[0, 1], top=top)
+        plotting.figure_legend(fig, axes)
+        fig.suptitle(heading("Newton iterations (linear solves) per step"))
+    paths["iterations"] = plotting.save(fig, out_dir / "iterations.png")
+
+    shared = any(r.batch_size > 1 for r in rows)
+    with plotting.style():
+        fig, axes = plotting.figure(nrows, ncols, panel=(4.2, 3.2))
+        for ax, k in zip(axes.flat, names):
+            for s in schemes:
+                mine = sorted((r for r in rows if r.scheme == s and np.isfinite(r.errors[k])), key=lambda r: -r.h)
+                if mine:  # joined in the order of decreasing h (increasing work)
+                    ax.loglog([r.wall_time_s for r in mine], [r.errors[k] for r in mine], label=s.upper(),
+                              **styles[s])
+            plotting.log_ticks(ax, "x")
+            plotting.log_ticks(ax, "y")
+            ax.set_xlabel("wall time, compile excluded [s]")
+            ax.set_ylabel(plotting.label(f"error of {k} (eq. 52)", ""))
+        plotting.hide_unused(axes, len(names))
+        plotting.figure_legend(fig, axes)
+        note = " (batched runs share their batch's wall time)" if shared else ""
+        fig.suptitle(heading(f"error against run time{note}"))
+    paths["work_precision"] = plotting.save(fig, out_dir / "work_precision.png")
     return paths

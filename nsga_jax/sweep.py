@@ -407,50 +407,45 @@ def _progress(done: int, total: int, members_done: int, members: int, elapsed: f
 # -------------------------------------------------------------------- plots
 
 
-def summary_columns(result: SweepResult) -> list[str]:
+def summary_columns(result: SweepResult, scene=None) -> list[str]:
     """The columns :func:`plot_sweep` shows: errors, solves per step,
-    penetration and the final values of the first observables."""
+    penetration and the final values of the first four observables of the
+    scene's plotted selection (:class:`~nsga_jax.scenes.base.SceneSpec`
+    ``plotted``; without a scene, the first four)."""
+    from .plotting import scene_spec
+
     cols = list(result.rows[0])
     errors = [c for c in cols if c.startswith("error_")]
-    finals = [c for c in cols if c.endswith("_final")][:4]
-    return errors + ["solves_per_step_mean", "max_penetration"] + finals
+    finals = [c for c in cols if c.endswith("_final")]
+    spec = scene_spec(scene)
+    chosen = [f"{k}_final" for k in (spec.plotted if spec is not None else ()) if f"{k}_final" in finals]
+    return errors + ["solves_per_step_mean", "max_penetration"] + (chosen or finals)[:4]
 
 
-def plot_sweep(result: SweepResult, path: Path) -> Path:
-    """Main columns against the swept values: curves over the first swept value
-    (one per value of the second, when there is one and it has at most 8)."""
-    import matplotlib
+def plot_sweep(result: SweepResult, path: Path, scene=None, scheme: str | None = None) -> Path:
+    """``sweep.png``: the :func:`summary_columns` against one swept value, one
+    line per combination of the other swept values (see
+    :func:`nsga_jax.plotting.sweep_figure`), axes in the scene's units.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    ``scene`` (a name or config) and ``scheme`` name the units and the title;
+    by default they are read from ``sweep.json`` beside ``path``, which
+    :func:`sweep` writes."""
+    from . import plotting
 
-    varying = [k for k in result.swept if len(set(result.column(k))) > 1] or result.swept[:1]
-    x_name = varying[0]
-    group = varying[1] if len(varying) > 1 and len(set(result.column(varying[1]))) <= 8 else None
-    cols = summary_columns(result)
-    ncol = min(3, len(cols))
-    nrow = -(-len(cols) // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
-    x = result.column(x_name).astype(float)
-    groups = sorted(set(result.column(group))) if group else [None]
-    for ax, col in zip(axes.flat, cols):
-        y = result.column(col).astype(float)
-        for g in groups:
-            sel = np.ones(len(x), bool) if g is None else result.column(group) == g
-            order = np.argsort(x[sel], kind="stable")
-            ax.plot(x[sel][order], y[sel][order], "o-", ms=3, label=None if g is None else f"{group} = {g:g}")
-        if col.startswith("error_") and np.all(y > 0):
-            ax.set_yscale("log")
-        if x_name == "h":
-            ax.set_xscale("log")
-        ax.set_xlabel(x_name)
-        ax.set_title(col, fontsize=9)
-        ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(cols):]:
-        ax.axis("off")
-    if group:
-        axes.flat[0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    path = Path(path)
+    overrides: dict[str, Any] = {}
+    manifest = path.parent / "sweep.json"
+    if scene is None and manifest.exists():
+        described = json.loads(manifest.read_text())
+        scene, overrides = described.get("scene"), described.get("overrides") or {}
+    loaded = None
+    if scene is not None:
+        try:
+            loaded = configure(scene, overrides)
+        except ConfigError:
+            pass
+    if scheme is None:
+        scheme = loaded.solver["scheme"] if loaded is not None else ""
+    spec = loaded.spec if loaded is not None else scene
+    fig = plotting.sweep_figure(result, summary_columns(result, spec), spec, scheme)
+    return plotting.save(fig, path)

@@ -108,6 +108,11 @@ class SceneSpec:
     observables: tuple[str, ...] = field(default=())
     error_observables: tuple[str, ...] = field(default=())
     """The observables the paper's convergence studies measure (eq. 52)."""
+    units: dict[str, str] = field(default_factory=dict)
+    """The SI unit of each observable (``"m"``, ``"m/s"``, ``"N"``, ``"J"``,
+    ``"rad"``, ``"rad/s"``; ``""`` for a dimensionless one), for plot axes."""
+    plotted: tuple[str, ...] = field(default=())
+    """The observables a run's plot shows by default (empty: every scalar one)."""
 
     def build(self, parameters: dict[str, Any], solver: dict[str, Any]) -> Scene:
         """A :class:`Scene` from validated parameters and solver settings

@@ -51,5 +51,6 @@ SPEC = register(
         exact=exact,
         observables=("z", "vz", "force", "energy"),
         error_observables=("z", "vz"),
+        units={"z": "m", "vz": "m/s", "force": "N", "energy": "J"},
     )
 )

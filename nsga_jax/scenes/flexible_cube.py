@@ -74,5 +74,8 @@ SPEC = register(
         check=check,
         observables=("x1_uz", "x1_vz", "x8_uz", "x8_vz", "min_gap", "contact_force", "energy", "gaps"),
         error_observables=("x1_uz", "x1_vz"),
+        units={"x1_uz": "m", "x1_vz": "m/s", "x8_uz": "m", "x8_vz": "m/s", "min_gap": "m",
+               "contact_force": "N", "energy": "J", "gaps": "m"},
+        plotted=("x1_uz", "x1_vz", "x8_uz", "x8_vz", "min_gap", "contact_force", "energy"),
     )
 )

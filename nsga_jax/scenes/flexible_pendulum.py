@@ -81,5 +81,8 @@ SPEC = register(
         observables=("tip_x", "tip_y", "tip_theta", "tip_vx", "tip_vy", "tip_omega", "tip_uy", "gap", "force",
                      "energy"),
         error_observables=("tip_uy", "tip_vy"),
+        units={"tip_x": "m", "tip_y": "m", "tip_theta": "rad", "tip_vx": "m/s", "tip_vy": "m/s",
+               "tip_omega": "rad/s", "tip_uy": "m", "gap": "m", "force": "N", "energy": "J"},
+        plotted=("tip_x", "tip_vx", "tip_uy", "tip_vy", "gap", "force", "tip_omega", "energy"),
     )
 )

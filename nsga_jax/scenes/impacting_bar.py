@@ -71,5 +71,7 @@ SPEC = register(
         check=check,
         observables=("tip_u", "tip_v", "node045_u", "node045_v", "tip_gap", "tip_force", "energy"),
         error_observables=("node045_u", "node045_v", "tip_u", "tip_v"),
+        units={"tip_u": "m", "tip_v": "m/s", "node045_u": "m", "node045_v": "m/s", "tip_gap": "m",
+               "tip_force": "N", "energy": "J"},
     )
 )

@@ -109,5 +109,10 @@ SPEC = register(
         observables=("x", "y", "z", "vx", "vy", "vz", "omega_x", "omega_y", "omega_z",
                      *(f"gap_{k}" for k in range(8)), *(f"gapdot_{k}" for k in range(8)), "energy", "rotation"),
         error_observables=("gap_5", "gapdot_5"),  # x_p: the vertex that hits the floor
+        units={"x": "m", "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s",
+               "omega_x": "rad/s", "omega_y": "rad/s", "omega_z": "rad/s",
+               **{f"gap_{k}": "m" for k in range(8)}, **{f"gapdot_{k}": "m/s" for k in range(8)},
+               "energy": "J", "rotation": ""},
+        plotted=("z", "vz", "gap_5", "gapdot_5", "omega_x", "omega_y", "omega_z", "energy"),
     )
 )

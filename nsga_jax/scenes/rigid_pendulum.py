@@ -68,5 +68,7 @@ SPEC = register(
         check=check,
         observables=("x", "y", "vx", "vy", "gap", "constraint", "force", "energy"),
         error_observables=("x", "vx"),
+        units={"x": "m", "y": "m", "vx": "m/s", "vy": "m/s", "gap": "m", "constraint": "m", "force": "N",
+               "energy": "J"},
     )
 )
