@@ -46,8 +46,8 @@ _LAZY = {
     "RigidPendulum": ".models",
     "ElasticBar": ".models",
     "load_scene": ".scenes",
-    "Trajectory": ".trajectory",
-    "trajectory": ".trajectory",
+    "Trajectory": "._trajectory",
+    "trajectory": "._trajectory",
     "Tolerances": ".monitors",
     "InvariantWarning": "._simulate",
 }

@@ -23,9 +23,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ._trajectory import ADJOINTS, trajectory
 from .results import ConfigError
 from .scenes.base import load_scene, make_scheme, parametrize
-from .trajectory import ADJOINTS, trajectory
 
 OPTIMIZERS = ("lbfgs", "adam")
 

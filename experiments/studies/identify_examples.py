@@ -83,9 +83,9 @@ def bar_checks() -> dict:
     import jax
     import jax.numpy as jnp
 
+    from nsga_jax import trajectory
     from nsga_jax.scenes import load_scene, parametrize
     from nsga_jax.scenes.base import make_scheme
-    from nsga_jax.trajectory import trajectory
 
     scene, overrides, observables, every, true, initial, _ = CASES["bar"]
     params, build = parametrize(scene, overrides, ["E", "e"])
