@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from .compilation_cache import cache_events, compile_source
 from .integrators.base import (
     AbstractScheme,
     Operators,
@@ -98,6 +99,7 @@ class Solution:
     observables: dict[str, np.ndarray] = field(default_factory=dict)
     totals: RunTotals | None = None
     warnings: list[str] = field(default_factory=list)
+    compile_source: str = "compiled"
 
     def __post_init__(self):
         if self.totals is None:
@@ -134,6 +136,7 @@ class Solution:
             "h": float(self.h),
             "wall_time_s": float(self.wall_time),
             "compile_time_s": float(self.compile_time),
+            "compile_source": self.compile_source,
             "us_per_step": 1e6 * float(self.wall_time) / max(int(self.n_steps), 1),
             "iterations": {
                 name: {"mean": float(tot.iterations_sum[i] / n), "max": int(tot.iterations_max[i])}
@@ -393,7 +396,8 @@ def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
 
     args0 = (model, scheme, jnp.asarray(t0), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h))
     tc = time.perf_counter()
-    prep = _prepare_and_init.lower(*args0).compile()
+    with cache_events() as cached_prep:
+        prep = _prepare_and_init.lower(*args0).compile()
     compile_time = time.perf_counter() - tc
 
     tw = time.perf_counter()
@@ -406,12 +410,14 @@ def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
     h_arr, stop = jnp.asarray(h, dtype), jnp.asarray(throw)
     shapes = (jnp.asarray(real(t0)), jnp.asarray(length, jnp.int32))
     tc = time.perf_counter()
-    run = _run_chunk_jit.lower(model, scheme, ops, state, h_arr, *shapes, stop, length).compile()
-    energy_of = _energy_of(model)
-    if energy_of is not None:
-        q_shape = jnp.zeros((length, model.n_dof), state.q.dtype)
-        energy_of = energy_of.lower(model, q_shape, q_shape).compile()
+    with cache_events() as cached:
+        run = _run_chunk_jit.lower(model, scheme, ops, state, h_arr, *shapes, stop, length).compile()
+        energy_of = _energy_of(model)
+        if energy_of is not None:
+            q_shape = jnp.zeros((length, model.n_dof), state.q.dtype)
+            energy_of = energy_of.lower(model, q_shape, q_shape).compile()
     compile_time += time.perf_counter() - tc
+    cached = {k: cached[k] + cached_prep[k] for k in cached}
 
     chunks, numbers = [], []
     totals = RunTotals(n_bilateral=model.n_bilateral)
@@ -467,6 +473,7 @@ def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         wall_time=wall,
         compile_time=compile_time,
         totals=totals,
+        compile_source=compile_source(cached),
     )
     if not (throw and first_failure is not None):
         return sol, None

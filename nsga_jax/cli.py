@@ -196,7 +196,7 @@ def _run(args) -> int:
     st = sol.stats
     it = st["iterations"]
     print(f"{st['n_steps']} steps in {st['wall_time_s']:.3f} s ({st['us_per_step']:.1f} us/step), "
-          f"compile {st['compile_time_s']:.2f} s; Newton iterations mean/max: "
+          f"compile {st['compile_time_s']:.2f} s ({st['compile_source']}); Newton iterations mean/max: "
           f"smooth {it['smooth']['mean']:.2f}/{it['smooth']['max']}, "
           f"position {it['position']['mean']:.2f}/{it['position']['max']}, "
           f"velocity {it['velocity']['mean']:.2f}/{it['velocity']['max']}; "
@@ -490,6 +490,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("\ninterrupted (Ctrl-C)", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # the output went to a pipe that closed (| head): nothing more to say
+        sys.stdout = open(os.devnull, "w")
+        return 0
 
 
 if __name__ == "__main__":

@@ -63,6 +63,35 @@ def current_cache_dir() -> Path | None:
 
 
 @contextlib.contextmanager
+def cache_events() -> Iterator[dict[str, int]]:
+    """Count the persistent cache's hits and misses of the compilations inside
+    the block (``{"hits": h, "misses": m}``, JAX's own monitoring events), so
+    that a run can say whether its programs were compiled or loaded."""
+    counts = {"hits": 0, "misses": 0}
+
+    def listener(event: str, **kwargs) -> None:
+        if event == "/jax/compilation_cache/cache_hits":
+            counts["hits"] += 1
+        elif event == "/jax/compilation_cache/cache_misses":
+            counts["misses"] += 1
+
+    jax.monitoring.register_event_listener(listener)
+    try:
+        yield counts
+    finally:
+        jax.monitoring.unregister_event_listener(listener)
+
+
+def compile_source(counts: dict[str, int]) -> str:
+    """How a run's programs were obtained, from :func:`cache_events`' counts."""
+    if counts["hits"] and not counts["misses"]:
+        return "loaded from the persistent cache"
+    if counts["hits"]:
+        return "partly loaded from the persistent cache"
+    return "compiled"
+
+
+@contextlib.contextmanager
 def compilation_cache(path: str | Path | None) -> Iterator[Path | None]:
     """Use the persistent cache at ``path`` (``None``: none) inside the block,
     and the previous setting after it."""
