@@ -375,8 +375,7 @@ def _sweep(args) -> int:
     from .validation import integer
 
     for name, value, lo in (("--batch-size", args.batch_size, 1), ("--devices", args.devices, 1),
-                            ("--max-records", args.max_records, 1), ("--num-processes", args.num_processes, 1),
-                            ("--process-id", args.process_id, 0)):
+                            ("--max-records", args.max_records, 1)):
         if value is not None:
             integer(name, value, lo)
     grid = parse_grid(args.grid)
@@ -396,7 +395,9 @@ def _sweep(args) -> int:
     devices = jax.devices() if args.devices is None else jax.devices()[: args.devices]
     if args.devices is not None and not 1 <= args.devices <= len(jax.devices()):
         raise ConfigError(f"--devices must be in [1, {len(jax.devices())}], got {args.devices}")
-    out = writable_folder(args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep")
+    out = args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep"
+    if jax.process_index() == 0:  # process 0 alone writes the sweep's files
+        writable_folder(out)
     try:
         result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
                        batch_size=args.batch_size, devices=devices, max_records=args.max_records,

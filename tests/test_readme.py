@@ -107,7 +107,17 @@ def _sweep(ns):
     assert (Path("ball_sweep") / "sweep.csv").exists()
 
 
+def _own_model_from_python(ns):
+    sol = ns["sol"]
+    assert sol.stats["failed_steps"] == 0 and sol.stats["max_penetration"] <= 1e-8
+    assert float(np.abs(ns["sol"].impulse[:, 2]).max()) > 0.0  # the wall was hit
+    grad = ns["jax"].grad(ns["x2_at_half_second"])(ns["params"])
+    assert float(grad["e"]) == pytest.approx(0.724, rel=1e-2)
+    assert float(grad["wall_x"]) == pytest.approx(0.296, rel=1e-2)
+
+
 CHECKS = {
+    ("docs/own-model.md", "## 4. From Python"): _own_model_from_python,
     ("README.md", "## A first example"): _readme_first_example,
     ("docs/python-api.md", "## Running a model: `simulate`"): _python_api_simulate,
     ("docs/python-api.md", "## Batches"): _python_api_batches,
@@ -130,6 +140,8 @@ def test_every_example_has_a_check_and_every_check_an_example():
 @pytest.mark.parametrize("example", EXAMPLES, ids=[f"{e.key[0]}: {e.key[1].lstrip('# ')}" for e in EXAMPLES])
 def test_example_runs_as_written(example, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)  # examples that write files write them here
+    (tmp_path / "docs").mkdir()  # ... and read the example scene files where the pages say (from the root)
+    (tmp_path / "docs" / "examples").symlink_to(ROOT / "docs" / "examples")
     namespace: dict = {"__name__": "__example__"}
     exec(compile(example.code, str(example.page), "exec", dont_inherit=True), namespace)
     printed = capsys.readouterr().out
@@ -253,3 +265,4 @@ def test_paths_named_in_the_pages_exist():
     assert named
     missing = sorted(p for p in named if not (ROOT / p).exists() and p not in WRITTEN_ELSEWHERE)
     assert not missing, missing
+

@@ -249,5 +249,8 @@ SPEC = register(
         check=check,
         observables=("x2", "y2", "vx2", "vy2", "x1", "y1", "gap", "rod1", "rod2", "force", "energy"),
         error_observables=("x2", "vx2"),
+        units={"x2": "m", "y2": "m", "vx2": "m/s", "vy2": "m/s", "x1": "m", "y1": "m", "gap": "m", "rod1": "m",
+               "rod2": "m", "force": "N", "energy": "J"},
+        plotted=("x2", "vx2", "gap", "force", "rod1", "rod2", "energy"),
     )
 )
