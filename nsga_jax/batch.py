@@ -269,8 +269,9 @@ class BatchRun:
             jax.block_until_ready((self._carry, packed, done))
             self.wall_time += time.perf_counter() - tw
             packed, done = _to_host((packed, done))
+            floats, ints = packed
             self._done += done.sum(axis=1)
-            yield unpack_outputs(*packed, self._template), done
+            yield unpack_outputs(floats, ints, self._template), done
 
 
 def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float, n_steps_requested: int,
