@@ -24,6 +24,7 @@ import time
 import warnings as _warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import Any, TypeVar, cast
 
 import equinox as eqx
 import jax
@@ -115,6 +116,7 @@ class Solution:
     def failed_steps(self) -> np.ndarray:
         """Step numbers k (t = t0 + k h) of the steps whose result is not
         successful; indices into ``ts`` when every step is recorded."""
+        assert self.totals is not None  # set by __post_init__
         return np.asarray(self.totals.failed, dtype=int)
 
     @property
@@ -130,8 +132,9 @@ class Solution:
     @property
     def stats(self) -> dict:
         tot = self.totals
+        assert tot is not None  # set by __post_init__
         n = max(tot.n_steps, 1)
-        stats = {
+        stats: dict[str, Any] = {
             "n_steps": int(self.n_steps),
             "h": float(self.h),
             "wall_time_s": float(self.wall_time),
@@ -221,7 +224,8 @@ def chunk_length(model: Model) -> int:
     return int(min(4096, max(64, 2 ** int(math.floor(math.log2(max(fit, 1)))))))
 
 
-_run_chunk_jit = eqx.filter_jit(_run_chunk)
+# filter_jit's wrapper has ``lower`` (compiled ahead of the run); its declared type is the bare function's
+_run_chunk_jit = cast(Any, eqx.filter_jit(_run_chunk))
 
 
 def _prepare_and_init_raw(model, scheme, t0, q0, v0, h):
@@ -230,7 +234,7 @@ def _prepare_and_init_raw(model, scheme, t0, q0, v0, h):
     return ops, state
 
 
-_prepare_and_init = eqx.filter_jit(_prepare_and_init_raw)
+_prepare_and_init = cast(Any, eqx.filter_jit(_prepare_and_init_raw))  # used through ``lower`` (as above)
 
 
 def simulate(
@@ -297,9 +301,9 @@ def simulate(
         chunk_size = integer("chunk_size", chunk_size, 1)
     for name, value in (("throw", throw), ("progress", progress), ("strict", strict)):
         require_instance(name, value, (bool, np.bool_), "True or False")
-    for name, value in (("on_chunk", on_chunk), ("observe", observe)):
-        if value is not None and not callable(value):
-            raise TypeError(f"{name} must be a function or None, got {type(value).__name__}")
+    for name, hook in (("on_chunk", on_chunk), ("observe", observe)):
+        if hook is not None and not callable(hook):
+            raise TypeError(f"{name} must be a function or None, got {type(hook).__name__}")
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
     require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.monitors.Tolerances")
     template = output_template(model, np.dtype(dtype))
@@ -310,6 +314,7 @@ def simulate(
         sol, error = _integrate(*_cast((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype), v0.astype(dtype),
                                 throw=throw, chunk_size=chunk_size, progress=progress, on_chunk=on_chunk,
                                 record_every=record_every, dtype=dtype)
+    assert sol.totals is not None  # _integrate accumulates them
     sol.warnings = warnings + invariant_warnings(sol.totals, tolerances, h, t0)
     for message in sol.warnings:
         _warnings.warn(message, InvariantWarning, stacklevel=2)
@@ -342,7 +347,8 @@ def precision(dtype: str):
     one precision would otherwise be lowered with the other's constants. A
     float32 run therefore compiles afresh each time.
     """
-    if dtype == "float64" and jax.config.jax_enable_x64:
+    # JAX's Config defines its options as attributes at run time: none is declared to mypy
+    if dtype == "float64" and jax.config.jax_enable_x64:  # type: ignore[attr-defined]
         yield
         return
     jax.clear_caches()
@@ -353,7 +359,10 @@ def precision(dtype: str):
         jax.clear_caches()
 
 
-def _cast(tree, dtype: str):
+_Tree = TypeVar("_Tree")
+
+
+def _cast(tree: _Tree, dtype: str) -> _Tree:
     """Every floating-point leaf of ``tree`` (arrays and NumPy scalars) as ``dtype``."""
 
     def cast(x):
@@ -436,7 +445,8 @@ def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         jax.block_until_ready((state, packed, done))
         wall += time.perf_counter() - tw
         packed, done = jax.device_get((packed, done))
-        full = unpack_outputs(*packed, template)
+        floats, ints = packed
+        full = unpack_outputs(floats, ints, template)
         energies = None if energy_of is None else np.asarray(energy_of(model, full.q, full.v))[done]
         out = jax.tree_util.tree_map(lambda x: x[done], full)
         if on_chunk is not None:

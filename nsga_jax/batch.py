@@ -89,7 +89,9 @@ def stack_models(models: Sequence[Model]) -> Model:
     parts = [eqx.partition(m, eqx.is_array) for m in models]
     static = parts[0][1]
     for i, (_, s) in enumerate(parts[1:], start=1):
-        if jax.tree_util.tree_structure(s) != jax.tree_util.tree_structure(static) or not eqx.tree_equal(s, static):
+        # jaxlib declares no type for its compiled PyTreeDef, so mypy cannot see that it compares
+        if (jax.tree_util.tree_structure(s) != jax.tree_util.tree_structure(static)  # type: ignore[operator]
+                or not eqx.tree_equal(s, static)):
             raise ConfigError(f"batch member {i} differs in structure from member 0 (sizes, element kinds "
                               "or other static fields); run such members in separate batches")
     dynamic = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *[d for d, _ in parts])
@@ -269,8 +271,9 @@ class BatchRun:
             jax.block_until_ready((self._carry, packed, done))
             self.wall_time += time.perf_counter() - tw
             packed, done = _to_host((packed, done))
+            floats, ints = packed
             self._done += done.sum(axis=1)
-            yield unpack_outputs(*packed, self._template), done
+            yield unpack_outputs(floats, ints, self._template), done
 
 
 def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float, n_steps_requested: int,

@@ -204,7 +204,7 @@ def _measure(scenes, batches, dtypes, scheme, repeats, max_steps, max_seconds, p
                 print(f"{name} {dtype}: warning: {single.stats['failed_steps']} failed step(s) "
                       f"({single.result.name}); its timings are those of a failing run", flush=True)
             single_us = 1e6 * wall / steps
-            error = ""
+            error: float | str = ""  # float32's error against float64 ("" for float64 itself)
             observable = (scene.spec.error_observables or scene.spec.observables)[0]
             if dtype == "float64":
                 reference = single

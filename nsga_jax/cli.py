@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import Any, cast
 
 from .results import ConfigError, ConvergenceError, InvariantError
 
@@ -39,8 +40,10 @@ def _parser() -> argparse.ArgumentParser:
                         help="compile afresh and keep nothing on disk (default: compiled programs are kept in "
                              f"${CACHE_ENV} or ~/.cache/nsga_jax/xla, and a later run of the same scene structure, "
                              "with any h and parameter values, loads them instead of compiling)")
+    # typeshed wants parents of the subparsers' own class (_Parser); argparse copies any parser's arguments
+    parents = cast(list[_Parser], [cached])
 
-    run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=[cached])
+    run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=parents)
     run.add_argument("scene", help="scene name (see `nsga-jax scenes`), a .toml config, or a .py file that registers "
                                    "a scene (file.py:NAME picks one of several)")
     run.add_argument("--h", type=float, help="step size [s]")
@@ -65,7 +68,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress output")
 
     conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size",
-                          parents=[cached])
+                          parents=parents)
     conv.add_argument("scene", help="scene name or .toml config")
     conv.add_argument("--scheme", default="ds", help="comma-separated schemes (ds, dsn, cs, mj)")
     conv.add_argument("--h", required=True, help="comma-separated step sizes [s]")
@@ -82,7 +85,7 @@ def _parser() -> argparse.ArgumentParser:
     conv.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_convergence)")
 
     ident = sub.add_parser("identify", help="fit scene parameters to measured (or synthetic) motion by "
-                                            "gradient descent through the simulation", parents=[cached])
+                                            "gradient descent through the simulation", parents=parents)
     ident.add_argument("scene", help="scene name or .toml config")
     ident.add_argument("--params", required=True, help="comma-separated float parameters to identify, e.g. E,e")
     source = ident.add_mutually_exclusive_group(required=True)
@@ -110,7 +113,7 @@ def _parser() -> argparse.ArgumentParser:
     ident.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_identify)")
 
     sw = sub.add_parser("sweep", help="run a scene for every combination of parameter values and step sizes "
-                                      "(batched, split over every device, resumable)", parents=[cached])
+                                      "(batched, split over every device, resumable)", parents=parents)
     sw.add_argument("scene", help="scene name or .toml config")
     sw.add_argument("--grid", required=True,
                     help="swept float parameters, e.g. 'e=0:1:11,E=800:1000:5' (start:stop:count) or 'e=0.2;0.5'")
@@ -183,6 +186,7 @@ def _run(args) -> int:
         sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, on_chunk=writer,
                         strict=args.strict)
     except (ConvergenceError, InvariantError) as err:
+        assert err.solution is not None  # simulate attaches the run to the errors it raises
         failure, sol = err, err.solution
     except KeyboardInterrupt:
         kept = sorted((Path(out) / "partial").glob("chunk_*.npz"))
@@ -307,6 +311,7 @@ def _identify(args) -> int:
         if value is not None:
             overrides[key] = value
     names = _names("--params", args.params)
+    true: dict[str, Any] | None  # the true values of synthetic data; None for measured data
     true, initial = _assignments(args.true, "--true"), _assignments(args.initial, "--initial")
     for label, values in (("--true", true), ("--initial", initial)):
         extra = [k for k in values if k not in names]

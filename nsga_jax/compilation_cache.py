@@ -58,8 +58,9 @@ def use_compilation_cache(path: str | Path | None) -> Path | None:
 
 def current_cache_dir() -> Path | None:
     """The folder of the persistent cache in use, or ``None``."""
-    path = jax.config.jax_compilation_cache_dir
-    return Path(path) if path and jax.config.jax_enable_compilation_cache else None
+    # JAX's Config defines its options as attributes at run time: none is declared to mypy
+    path = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]
+    return Path(path) if path and jax.config.jax_enable_compilation_cache else None  # type: ignore[attr-defined]
 
 
 @contextlib.contextmanager

@@ -99,7 +99,8 @@ def rigid_pendulum(t, length: float, gravity: float, angle: float, omega: float,
     controller = diffrax.PIDController(rtol=rtol, atol=rtol)
     phi = np.empty_like(t)
     dphi = np.empty_like(t)
-    t0, y0, impacts = 0.0, jnp.array([angle, omega]), []
+    t0, y0 = 0.0, jnp.array([angle, omega])
+    impacts: list[float] = []
     t_end = float(t.max(initial=0.0))
     while t0 < t_end:
         sol = diffrax.diffeqsolve(term, diffrax.Dopri8(), jnp.asarray(t0), jnp.asarray(t_end), jnp.asarray(1e-3),

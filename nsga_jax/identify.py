@@ -16,7 +16,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -46,7 +46,9 @@ class Data:
             raise ConfigError(f"data file {str(path)!r} does not exist")
         if path.suffix == ".csv":
             table = np.genfromtxt(path, delimiter=",", names=True)
-            columns = {k: np.atleast_1d(table[k]) for k in table.dtype.names}
+            names = table.dtype.names
+            assert names is not None  # names=True: a structured array
+            columns = {k: np.atleast_1d(table[k]) for k in names}
         elif path.suffix == ".npz":
             with np.load(path) as f:
                 columns = {k: np.asarray(f[k], float) for k in f.files}
@@ -78,7 +80,8 @@ class Data:
             table = np.column_stack([self.t, *self.values.values()])
             np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
         else:
-            np.savez(path, t=self.t, **self.values)
+            # numpy's stub would let **values fill allow_pickle
+            np.savez(path, t=self.t, **cast(dict[str, Any], self.values))
         return path
 
 

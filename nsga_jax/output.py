@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -34,14 +34,14 @@ def chunk_writer(out_dir: Path):
     def write(k: int, records: StepOutput) -> None:
         arrays = {f: np.asarray(getattr(records, f)) for f in RECORD_FIELDS}
         tmp = partial / f"chunk_{k:05d}.tmp.npz"
-        np.savez(tmp, **arrays)
+        np.savez(tmp, **cast(dict[str, Any], arrays))  # numpy's stub would let **arrays fill allow_pickle
         tmp.rename(partial / f"chunk_{k:05d}.npz")
 
     return write
 
 
 def summary(sol: Solution, scene: str, scheme: str, extra: dict[str, Any] | None = None) -> dict:
-    out = {"scene": scene, "scheme": scheme}
+    out: dict[str, Any] = {"scene": scene, "scheme": scheme}
     out.update(sol.stats)
     out["t_end"] = float(sol.ts[-1])
     if extra:
@@ -60,7 +60,7 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, P
     for name, values in sol.observables.items():
         arrays[name] = values
     paths["trajectory"] = out_dir / "trajectory.npz"
-    np.savez_compressed(paths["trajectory"], **arrays)
+    np.savez_compressed(paths["trajectory"], **cast(dict[str, Any], arrays))  # as in chunk_writer
     paths["summary"] = out_dir / "summary.json"
     paths["summary"].write_text(json.dumps(info, indent=2) + "\n")
     scene, scheme = info.get("scene", ""), info.get("scheme", "")

@@ -25,11 +25,14 @@ import re
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-STYLE = {
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
+STYLE: dict[RcKeyType, Any] = {
     "font.size": 9.0,
     "axes.titlesize": 9.0,
     "axes.labelsize": 9.0,
@@ -215,7 +218,7 @@ def integer_ticks(ax, axis: str = "y", top: float | None = None) -> None:
     getattr(ax, f"{axis}axis").set_major_locator(locator)
 
 
-def log_ticks(ax, axis: str = "x", values: Sequence[float] | None = None, max_ticks: int = 6) -> None:
+def log_ticks(ax, axis: str = "x", values: Sequence[float] | np.ndarray | None = None, max_ticks: int = 6) -> None:
     """Readable ticks on a log axis: at ``values`` (e.g. the step sizes of a
     study) when they are few and far enough apart, else at 1, 2, 5 or 1 per
     decade as the span allows; plain ``%g`` labels and no minor labels, so
@@ -228,7 +231,8 @@ def log_ticks(ax, axis: str = "x", values: Sequence[float] | None = None, max_ti
     if values is not None:
         v = np.unique([x for x in np.asarray(values, float).ravel() if np.isfinite(x) and x > 0])
         if 1 <= v.size <= max_ticks and (v.size == 1 or np.min(np.diff(np.log10(v))) >= 0.12):
-            which.set_major_locator(FixedLocator(v))
+            # matplotlib's stub asks for a Sequence[float]; FixedLocator takes any array (np.asarray)
+            which.set_major_locator(FixedLocator(v))  # type: ignore[arg-type]
             which.set_major_formatter(fmt)
             return
     lo, hi = (ax.get_xlim() if axis == "x" else ax.get_ylim())

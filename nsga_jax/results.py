@@ -8,6 +8,10 @@ the time, the sub-problem and the residual, unless the caller asked not to throw
 from __future__ import annotations
 
 import enum
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ._simulate import Solution
 
 SUBPROBLEMS = ("smooth motion", "position correction", "velocity jump")
 COUPLED = "coupled iteration"
@@ -61,7 +65,7 @@ class ConvergenceError(RuntimeError):
 
     def __init__(self, step: int, time: float, result: Result, residual: float, tolerance: float,
                  hint: str = ""):
-        self.solution = None
+        self.solution: Solution | None = None
         self.step = step
         self.time = time
         self.result = result
@@ -79,7 +83,7 @@ class InvariantError(RuntimeError):
     """A run that a ``strict`` caller asked to fail when an invariant broke
     (energy created at an impact); carries the run's ``solution``."""
 
-    def __init__(self, message: str, solution=None):
+    def __init__(self, message: str, solution: Solution | None = None):
         self.solution = solution
         super().__init__(message + ". (strict: energy growth at impacts is an error; without strict it is a "
                          "warning in the run's summary)")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,12 +76,13 @@ class Reference:
     """A reference solution: ``values(ts)`` gives each observable at the times ``ts``."""
 
     description: str
-    exact: object = None
+    exact: Callable[[np.ndarray], dict[str, np.ndarray]] | None = None
     solution: Solution | None = None
     wall_time: float = 0.0
 
     def values(self, ts: np.ndarray, names) -> dict[str, np.ndarray]:
         if self.solution is None:
+            assert self.exact is not None  # a reference is a solution or an exact one
             ex = self.exact(ts)
             return {k: ex[k] for k in names}
         ref = self.solution

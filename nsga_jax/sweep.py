@@ -108,8 +108,9 @@ class Member:
         return self._scene
 
 
-def members(scene: str | Path, grid: dict[str, Sequence[float]], hs: Sequence[float] | None,
-            overrides: dict[str, Any] | None, progress: bool = False) -> list[Member]:
+def members(scene: str | Path, grid: dict[str, Sequence[float]] | dict[str, np.ndarray],
+            hs: Sequence[float] | np.ndarray | None, overrides: dict[str, Any] | None,
+            progress: bool = False) -> list[Member]:
     """Every combination of the grid's values and of the step sizes, each
     validated (bad values raise :class:`ConfigError` before anything is
     compiled; models are built batch by batch)."""
@@ -257,9 +258,9 @@ def _row(member: Member, sol: Solution) -> dict[str, Any]:
 
 def sweep(
     scene: str | Path,
-    grid: dict[str, Sequence[float]],
+    grid: dict[str, Sequence[float]] | dict[str, np.ndarray],
     *,
-    hs: Sequence[float] | None = None,
+    hs: Sequence[float] | np.ndarray | None = None,
     overrides: dict[str, Any] | None = None,
     out: str | Path | None = None,
     batch_size: int | None = None,
@@ -314,6 +315,7 @@ def sweep(
         batch = mems[k * batch_size:(k + 1) * batch_size]
         path = None if out_dir is None else out_dir / "batches" / f"batch_{k:05d}.csv"
         if agree(path is not None and path.exists()):  # process 0 decides: every process skips or runs it
+            assert path is not None  # every process gives the same out
             rows = _read_batch(path, batch) if path.exists() else []
         else:
             rows, compile_time, wall = _batch_rows(batch, padded, mesh, max_records)

@@ -13,6 +13,8 @@ vector-space scheme applies as written.
 
 from __future__ import annotations
 
+from typing import cast
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -69,7 +71,8 @@ def point_heights(q: jax.Array, X: jax.Array) -> jax.Array:
 def angular_velocity(q: jax.Array, qdot: jax.Array) -> jax.Array:
     """Spatial angular velocity ω (3,) [rad/s] from ``u̇ = ω × u`` etc.:
     ``ω = ½ Σ_i u_i × u̇_i`` for an orthonormal frame."""
-    return 0.5 * sum(jnp.cross(q[3 * i:3 * i + 3], qdot[3 * i:3 * i + 3]) for i in (1, 2, 3))
+    # a sum of three arrays: never the empty sum's 0
+    return 0.5 * cast(jax.Array, sum(jnp.cross(q[3 * i:3 * i + 3], qdot[3 * i:3 * i + 3]) for i in (1, 2, 3)))
 
 
 def natural_velocities(R: jax.Array, omega: jax.Array, v_com: jax.Array) -> jax.Array:

@@ -13,7 +13,7 @@ import abc
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple, cast
 
 import equinox as eqx
 import jax
@@ -175,9 +175,10 @@ def constant_operators(
     p_inv, p_Gt = invert(position if nc else None, position_needs_constant_G, slice(0, nc))
     v_inv, v_Gt = invert(velocity if nc else None, velocity_needs_constant_G, slice(0, nc))
     M_norm = None if M is None else jnp.linalg.norm(M)
-    bands = {}
+    bands: dict[str, jax.Array | None] = {}
     if banded(model):
         b = model.bandwidth
+        assert b is not None and M is not None and K is not None and C is not None  # banded: linear, constant mass
         bands = {"M_band": band_matrix(M, b), "K_band": band_matrix(K, b),
                  "C_band": band_matrix(C, b) if model.velocity_dependent_force else None}
     return Operators(M=M, M_norm=M_norm, K=K, C=C, K_norm=K_norm, C_norm=C_norm, G=G,
@@ -281,7 +282,7 @@ def mass_norm(model: Model, ops: Operators, q: Vector) -> Scalar:
     return ops.M_norm if ops.M_norm is not None else jnp.linalg.norm(model.mass(q))
 
 
-def roundoff_floor(scale: Scalar, K_norm, C_norm, q, v, inertia: Scalar = 0.0) -> Scalar:
+def roundoff_floor(scale: Scalar, K_norm, C_norm, q, v, inertia: ScalarLike = 0.0) -> Scalar:
     """``ROUNDOFF_FACTOR * eps * scale * (||K|| ||q|| + ||C|| ||v|| + inertia)``: the
     round-off of a residual whose terms cancel; ``inertia`` adds the round-off of
     an inertia term formed from a difference of velocities (step 1's v̇̃)."""
@@ -384,14 +385,14 @@ def output_template(model: Model, dtype) -> StepOutput:
     size their record buffers with it instead of tracing the step once more."""
     n, nb, nc, nu = model.n_dof, model.n_bilateral, model.n_constraints, model.n_unilateral
 
-    def f(*shape):
+    def f(*shape, dtype=dtype) -> Any:  # a ShapeDtypeStruct where StepOutput's fields are typed as arrays
         return jax.ShapeDtypeStruct(shape, dtype)
 
-    flags = jax.ShapeDtypeStruct((nc,), jnp.bool_)
+    flags = f(nc, dtype=jnp.bool_)
     return StepOutput(t=f(), q=f(n), v=f(n), lam=f(nb), nu=f(nc), impulse=f(nc), gap=f(nu), bilateral=f(nb),
                       bilateral_rate=f(nb), active_position=flags, active_velocity=flags,
-                      iterations=jax.ShapeDtypeStruct((3,), jnp.int32), residual=f(3), tolerance=f(3),
-                      result=jax.ShapeDtypeStruct((), jnp.int8))
+                      iterations=f(3, dtype=jnp.int32), residual=f(3), tolerance=f(3),
+                      result=f(dtype=jnp.int8))
 
 
 def _is_float(spec) -> bool:
@@ -472,7 +473,8 @@ class AbstractScheme(eqx.Module):
 
     @property
     def tolerances(self) -> tuple[Scalar, Scalar, int]:
-        return self.tol_r, self.tol_f, self.max_iter
+        # tol_r and tol_f are typed as what __init__ accepts; their converter (as_float) made them arrays
+        return cast(jax.Array, self.tol_r), cast(jax.Array, self.tol_f), self.max_iter
 
     @abc.abstractmethod
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:

@@ -23,6 +23,7 @@ made with them converges too slowly (:func:`~nsga_jax.integrators.newton.newton`
 from __future__ import annotations
 
 import dataclasses
+from typing import cast
 
 import equinox as eqx
 import jax
@@ -119,7 +120,8 @@ class DS(AbstractGenAlpha):
         (Read from the structure of ``prepare``'s result, traced abstractly.)"""
         if not self.fast_paths or model.n_dof < self.reuse_min_dof:
             return False, False, False
-        ops = jax.eval_shape(lambda h: self.prepare(model, h, 0.0), 1.0)
+        # only shapes matter here: a Python 0.0 stands for the start time
+        ops = jax.eval_shape(lambda h: self.prepare(model, h, cast(Scalar, 0.0)), 1.0)
         has_jumps = model.n_constraints > 0
         return (ops.smooth_inv is None, has_jumps and ops.position_inv is None,
                 has_jumps and ops.velocity_inv is None)

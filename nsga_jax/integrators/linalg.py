@@ -25,6 +25,7 @@ import contextvars
 import functools
 import math
 from collections.abc import Callable, Iterator
+from typing import cast
 
 import equinox as eqx
 import jax
@@ -234,7 +235,8 @@ def band_product(band: jax.Array, x: Vector) -> Vector:
     b = (band.shape[0] - 1) // 2
     n = x.shape[0]
     padded = jnp.pad(x, (b, b))
-    return sum(band[b + k] * padded[b + k:b + k + n] for k in range(-b, b + 1))
+    # a sum of 2b + 1 >= 1 arrays: never the empty sum's 0
+    return cast(jax.Array, sum(band[b + k] * padded[b + k:b + k + n] for k in range(-b, b + 1)))
 
 
 def dense_solve(matrix: jax.Array) -> Solve:

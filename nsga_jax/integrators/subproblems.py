@@ -226,6 +226,7 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if not model.constant_mass:
             f_const = f_const - (model.mass_product(q, smooth.vd) - model.mass_product(smooth.q, smooth.vd))
         if not model.velocity_dependent_force:  # f(q, v) - f(q̃, ṽ) does not change with W
+            assert f_smooth is not None  # given whenever with_forces
             f_const = f_const + force_change(model, ops, f_smooth, q, smooth.v, t)
 
     def residual(x):
