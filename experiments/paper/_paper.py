@@ -21,13 +21,21 @@ STUDY_FIELDS = ("scheme", "h", "n_steps", "batch_size", "wall_time_s", "compile_
                 "first_failure_t", "result")
 
 
+def arguments(script_doc: str, name: str, **flags: str) -> argparse.Namespace:
+    """Parse ``--out`` (default experiments/out/<name>, created) and the boolean
+    ``flags`` (``fig6_only="help"`` gives ``--fig6-only``)."""
+    parser = argparse.ArgumentParser(description=script_doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path("experiments/out") / name)
+    for flag, text in flags.items():
+        parser.add_argument("--" + flag.replace("_", "-"), action="store_true", help=text)
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    return args
+
+
 def output_dir(script_doc: str, name: str) -> Path:
     """Parse ``--out`` (default experiments/out/<name>) and create the folder."""
-    parser = argparse.ArgumentParser(description=script_doc)
-    parser.add_argument("--out", type=Path, default=Path("experiments/out") / name)
-    out = parser.parse_args().out
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    return arguments(script_doc, name).out
 
 
 def run_study(name: str, schemes, hs, ref_h: float, ref_scheme: str, overrides: dict, out: Path,
