@@ -5,28 +5,42 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from nsga_jax.studies import make_reference, slopes, study, write_study
+from nsga_jax import plotting
+from nsga_jax.studies import Reference, StudyRow, make_reference, slopes, study, write_study
+from nsga_jax.tables import read_csv
 
 FIGURES = Path("docs/figures")
+RESULTS = Path("docs/results")
+STUDY_FIELDS = ("scheme", "h", "n_steps", "batch_size", "wall_time_s", "compile_time_s", "failed_steps",
+                "first_failure_t", "result")
+
+
+def arguments(script_doc: str, name: str, **flags: str) -> argparse.Namespace:
+    """Parse ``--out`` (default experiments/out/<name>, created) and the boolean
+    ``flags`` (``fig6_only="help"`` gives ``--fig6-only``)."""
+    parser = argparse.ArgumentParser(description=script_doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path("experiments/out") / name)
+    for flag, text in flags.items():
+        parser.add_argument("--" + flag.replace("_", "-"), action="store_true", help=text)
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    return args
 
 
 def output_dir(script_doc: str, name: str) -> Path:
     """Parse ``--out`` (default experiments/out/<name>) and create the folder."""
-    parser = argparse.ArgumentParser(description=script_doc)
-    parser.add_argument("--out", type=Path, default=Path("experiments/out") / name)
-    out = parser.parse_args().out
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    return arguments(script_doc, name).out
 
 
 def run_study(name: str, schemes, hs, ref_h: float, ref_scheme: str, overrides: dict, out: Path,
               mode: str = "separate", max_iter_cs: int | None = None, observables=None):
-    """Reference, study, CSV/PNG; copies the PNGs to docs/figures/<name>_*.png."""
+    """Reference, study, CSV/PNG; copies the PNGs to docs/figures/paper_<name>_*.png."""
     t = time.perf_counter()
     print(f"{name}: reference {ref_scheme.upper()} at h = {ref_h:g} ...", flush=True)
     reference = make_reference(name, {**overrides, "scheme": ref_scheme}, ref_h)
@@ -35,12 +49,76 @@ def run_study(name: str, schemes, hs, ref_h: float, ref_scheme: str, overrides: 
         extra = {"max_iter": max_iter_cs} if (scheme == "cs" and max_iter_cs) else {}
         print(f"{name}: {scheme.upper()} at h = {', '.join(f'{h:g}' for h in hs)} ...", flush=True)
         rows += study(name, [scheme], hs, reference, {**overrides, **extra}, observables, mode=mode)
-    paths = write_study(rows, out, name, reference)
-    FIGURES.mkdir(parents=True, exist_ok=True)
-    for key in ("convergence", "iterations", "work_precision"):
-        shutil.copy(paths[key], FIGURES / f"paper_{name}_{key}.png")
+    draw(rows, out, name, reference)
     elapsed = time.perf_counter() - t
     return rows, reference, elapsed
+
+
+def read_study(results_dir: Path) -> tuple[str, list[StudyRow], Reference]:
+    """The scene, the rows and the reference of a committed study (study.csv and
+    claims.json of a results folder such as docs/results/paper_bar), read back
+    as written by :func:`run_study` and :func:`finish`."""
+    results_dir = Path(results_dir)
+    claims = json.loads((results_dir / "claims.json").read_text())
+    rows = []
+    for r in read_csv(results_dir / "study.csv"):
+        stats = [c[: -len("_mean")] for c in r if c.endswith("_mean")]
+        rows.append(StudyRow(
+            **{k: r[k] for k in STUDY_FIELDS},
+            iterations={s: {"mean": r[f"{s}_mean"], "max": r[f"{s}_max"]} for s in stats},
+            errors={c[len("error_"):]: float(v) for c, v in r.items() if c.startswith("error_")},
+        ))
+    return claims["scene"], rows, Reference(description=claims["reference"])
+
+
+def _wrap_orders(fig) -> None:
+    """Panel titles "observed order: DS 1.28, DSN 1.87, CS 1.24, MJ 1.18" of four
+    schemes are wider than a panel (they ran into the next panel and the
+    legend): the orders go on a line of their own."""
+    for ax in fig.axes:
+        text = ax.get_title(loc="left")
+        if text.startswith("observed order: "):
+            ax.set_title(text.replace(": ", ":\n", 1), loc="left")
+
+
+def _log_solves(fig, spread: float = 20.0) -> None:
+    """Linear solves per step on a log axis when the schemes differ by more than
+    ``spread`` (CS's hundreds beside DS's one to five, which a linear axis
+    flattens onto zero), with the same limits in both panels."""
+    axes = [ax for ax in fig.axes if "linear solves per step" in ax.get_ylabel()]
+    ys = np.concatenate([np.asarray(line.get_ydata(), float) for ax in axes for line in ax.lines] or [[]])
+    ys = ys[np.isfinite(ys) & (ys > 0)]
+    if ys.size == 0 or ys.max() < spread * ys.min():
+        return
+    for ax in axes:
+        ax.set_yscale("log")
+        ax.set_ylim(0.8 * ys.min(), 1.5 * ys.max())
+        plotting.log_ticks(ax, "y")
+
+
+def draw(rows, out: Path, name: str, reference: Reference) -> dict[str, Path]:
+    """study.csv and the three study figures in ``out`` (:func:`write_study`,
+    with :func:`_wrap_orders` and :func:`_log_solves`), the figures copied to
+    docs/figures/paper_<name>_*.png."""
+    with plotting.capture() as figures:
+        paths = write_study(rows, out, name, reference)
+    with plotting.style():
+        _wrap_orders(figures[paths["convergence"]])
+        _log_solves(figures[paths["iterations"]])
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    for key in ("convergence", "iterations", "work_precision"):
+        plotting.save(figures[paths[key]], paths[key])
+        shutil.copy(paths[key], FIGURES / f"paper_{name}_{key}.png")
+    return paths
+
+
+def replot(results_dir: Path) -> list[Path]:
+    """Redraw the three study figures of a committed study from its CSV (no
+    rerun) into docs/figures/paper_<scene>_*.png."""
+    name, rows, reference = read_study(results_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        draw(rows, Path(tmp), name, reference)
+    return [FIGURES / f"paper_{name}_{key}.png" for key in ("convergence", "iterations", "work_precision")]
 
 
 def table(rows) -> str:

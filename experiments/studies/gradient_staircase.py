@@ -25,13 +25,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import matplotlib  # noqa: E402
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
+from nsga_jax import plotting  # noqa: E402
 from nsga_jax.exact import bouncing_ball  # noqa: E402
 from nsga_jax.scenes.base import parametrize  # noqa: E402
 
@@ -75,38 +72,47 @@ def main() -> None:
     exact = np.array([exact_loss(e) for e in es])
     exact_grad = np.array([exact_derivative(e) for e in es])
 
-    fig, axes = plt.subplots(3, 1, figsize=(7.5, 9.5))
-    ax = axes[0]
-    ax.plot(es, exact, "k-", lw=2, alpha=0.4, label="exact (continuous time)")
-    for h in hs:
-        ax.plot(es, scans[h][0][0], lw=1, label=f"DS, h = {h:g} s")
-    ax.set_ylabel("loss [m²]")
-    ax.set_title("bouncing ball: loss against e (data: exact solution at e = 0.8)")
-    ax.legend(fontsize=8)
-    ax = axes[1]
-    ax.plot(zoom, scans[1e-3][1][0], ".-", ms=2, lw=0.8, label="DS, h = 1e-3 s")
-    ax.plot(zoom, [exact_loss(e) for e in zoom], "k-", alpha=0.4, label="exact")
-    ax.set_ylabel("loss [m²]")
-    ax.set_title("zoom: a staircase of smooth pieces (each impact jumps a step)")
-    ax.legend(fontsize=8)
-    ax = axes[2]
-    ax.plot(es, exact_grad, "k-", lw=2, alpha=0.4, label="exact dL/de (continuous time)")
-    for h in hs:
-        values, grads = scans[h][0]
-        ax.plot(es, grads, lw=1, label=f"nsga_jax gradient, h = {h:g} s")
-    values = scans[1e-3][0][0]
-    wide = 20  # points: a central difference over 2 * 20 * 2.5e-4 = 0.01 in e
-    fd_wide = (values[2 * wide:] - values[:-2 * wide]) / (es[2 * wide:] - es[:-2 * wide])
-    ax.plot(es[wide:-wide], fd_wide, "--", lw=1, label="finite differences, step 5e-3 (h = 1e-3)")
-    ax.set_xlabel("e")
-    ax.set_ylabel("dL/de [m²]")
-    ax.legend(fontsize=8)
-    for a in axes:
-        a.grid(True, alpha=0.3)
-    fig.tight_layout()
+    unit = plotting.observable_unit("bouncing_ball", "z") + "^2"
+    looks = {1e-3: dict(color="C0", ls="-", lw=1.5), 1e-4: dict(color="C1", ls="--", lw=1.0)}
+    exact_look = dict(color="k", ls="-", lw=3, alpha=0.25)
+    e_label = plotting.label("restitution coefficient e", "")
+    with plotting.style():
+        fig, axes = plotting.figure(3, 1, panel=(6.6, 2.5))
+        ax = axes[0, 0]
+        ax.plot(es, exact, label="continuous time (exact)", **exact_look)
+        for h in hs:
+            ax.plot(es, scans[h][0][0], label=f"DS, h = {h:g} s", **looks[h])
+        ax.set_ylabel(plotting.label("loss L", unit))
+        ax.set_title("loss against e", loc="left")
+        ax.legend(loc="upper center")
+        ax = axes[1, 0]
+        milli = 1e3  # the zoom's loss in 10^-3 m^2, not with an offset multiplier over the axis
+        ax.plot(zoom, milli * np.array([exact_loss(e) for e in zoom]), label="continuous time (exact)",
+                **exact_look)
+        ax.plot(zoom, milli * scans[1e-3][1][0], ".-", ms=2, lw=0.8, color="C0", label="DS, h = 0.001 s")
+        ax.set_ylabel(plotting.label("loss L", "10^-3 " + unit))
+        ax.set_title("zoom: a staircase of smooth pieces (an impact instant jumps one step)", loc="left")
+        ax.legend(loc="lower right")
+        ax = axes[2, 0]
+        ax.plot(es, exact_grad, label="exact dL/de", **exact_look)
+        for h in hs:
+            values, grads = scans[h][0]
+            ax.plot(es, grads, label=f"nsga_jax gradient, h = {h:g} s", **looks[h])
+        values = scans[1e-3][0][0]
+        wide = 20  # points: a central difference over 2 * 20 * 2.5e-4 = 0.01 in e
+        fd_wide = (values[2 * wide:] - values[:-2 * wide]) / (es[2 * wide:] - es[:-2 * wide])
+        ax.plot(es[wide:-wide], fd_wide, ":", color="C2", lw=1.6,
+                label="FD of the loss, step 5e-3, h = 0.001 s")
+        ax.set_ylabel(plotting.label("dL/de", unit))
+        ax.set_title("derivative against e", loc="left")
+        ax.legend(loc="upper left")
+        for ax in axes[:, 0]:
+            ax.set_xlabel(e_label)
+            plotting.plain_ticks(ax, "x")
+        fig.suptitle(plotting.title("bouncing_ball", "ds", hs, f"L: mean square mismatch of z over {T_END:g} s "
+                                    f"against the exact solution at e = {E_TRUE:g}"))
     FIGURE.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(FIGURE, dpi=120)
-    plt.close(fig)
+    plotting.save(fig, FIGURE)
 
     # table: at a few e, the gradient, central differences with small and large steps, exact
     rows = []

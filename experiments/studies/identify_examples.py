@@ -27,6 +27,7 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from nsga_jax.identify import Data, identify, synthetic_data, write_identification  # noqa: E402
+from nsga_jax.scenes import load_scene  # noqa: E402
 
 FIGURES = Path("docs/figures")
 RESULTS = Path("docs/results/identification")
@@ -60,7 +61,10 @@ def run_case(name: str, out: Path) -> dict:
             k: result.summary()[k] for k in ("recovered", "iterations", "evaluations", "stopped_by",
                                              "final_loss", "wall_time_s", "compile_time_s")}})
     case_out = out / name
-    paths = write_identification(result, stage_data, case_out, title=f"{scene}: {', '.join(names)} (1 % noise)")
+    found = ", ".join(f"{k}: {initial[k]:.4g} → {current[k]:.4g} (true {true[k]:.4g})" for k in true)
+    last = f"; last of {len(stages)} stages shown" if len(stages) > 1 else ""
+    paths = write_identification(result, stage_data, case_out, title=f"{found}; {NOISE:.0%} noise{last}",
+                                 scene=load_scene(scene, {**overrides, **current}))
     data.save(case_out / "data.csv")
     FIGURES.mkdir(parents=True, exist_ok=True)
     for key in ("loss", "fit"):
