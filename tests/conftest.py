@@ -20,3 +20,62 @@ def _compilation_cache(tmp_path_factory):
     """Command-line runs (here and in subprocesses) keep their compiled programs
     in a folder of the test session, never in the user's cache."""
     os.environ[ENV] = str(tmp_path_factory.mktemp("xla_cache"))
+
+
+LONG = {
+    # Tests of 4 s or more on a 2-core machine (pytest --durations), run by `pytest -m slow`
+    # (CI runs both suites); each feature keeps a quicker test in the default run.
+    "test_cli.py::test_later_runs_load_compiled_programs_from_the_cache",
+    "test_event_gradients.py::test_pendulum_event_gradient_in_wall_position",
+    "test_event_gradients.py::test_ball_event_gradient_converges_to_the_exact_derivative",
+    "test_event_gradients.py::test_event_gradient_forward_equals_reverse",
+    "test_event_gradients.py::test_away_from_impacts_both_adjoints_agree",
+    "test_gradients.py::test_rigid_box_restitution_against_fd",
+    "test_gradients.py::test_bar_reverse_equals_forward",
+    "test_gradients.py::test_rigid_pendulum_against_fd",
+    "test_gradients.py::test_bar_tip_displacement_against_fd",
+    "test_gradients.py::test_checkpointing_choices_give_the_same_gradient",
+    "test_gradients.py::test_spectral_radius_is_differentiable",
+    "test_identify.py::test_cli_identify_synthetic_then_from_file",
+    "test_identify.py::test_adam_also_descends",
+    "test_newton.py::test_gradients_with_reused_factorisations",
+    "test_newton.py::test_reused_subproblems_are_those_left_non_constant",
+    "test_newton.py::test_a_batch_with_held_factorisations_equals_single_runs",
+    "test_own_model.py::test_cli_identify_recovers_restitution",
+    "test_own_model.py::test_cli_run",
+    "test_own_model.py::test_cli_convergence",
+    "test_own_model.py::test_cli_sweep",
+    "test_own_model.py::test_impact_against_event_driven_reference",
+    "test_own_model.py::test_smooth_motion_matches_the_angle_equations_to_second_order",
+    "test_paper_scenes.py::test_flexible_cube_impact_window",
+    "test_paper_scenes.py::test_flexible_pendulum_paper_run",
+    "test_performance.py::test_device_check_agreement_runs",
+    "test_performance.py::test_bench_writes_its_table",
+    "test_performance.py::test_fast_paths_agree_for_other_schemes",
+    "test_performance.py::test_fast_paths_agree_with_generic_path",
+    "test_performance.py::test_a_batch_is_skipped_on_its_probes_estimate",
+    "test_precision_and_records.py::test_float32_run_converges_and_follows_float64",
+    "test_precision_and_records.py::test_float32_failure_message_names_the_precision",
+    "test_readme.py::test_example_runs_as_written[docs/gradients.md: Gradients through whole trajectories]",
+    "test_readme.py::test_example_runs_as_written[docs/sweeps-and-devices.md: Sweeps]",
+    "test_rigid_box.py::test_free_flight_conserves_energy_and_angular_momentum",
+    "test_rigid_box.py::test_flight_before_impact_matches_rigid_body_ode",
+    "test_studies.py::test_vmap_over_step_sizes_equals_separate_runs",
+    "test_sweep.py::test_sharded_sweep_equals_unsharded",
+    "test_sweep.py::test_sweep_over_two_processes_equals_one_process",
+    "test_sweep.py::test_two_processes_resume_as_process_0_decides",
+    "test_sweep.py::test_failed_runs_are_reported",
+    "test_sweep.py::test_rigid_box_sweep_equals_single_runs",
+}
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Mark the tests named in :data:`LONG` slow (every parametrization of a
+    function, or one parametrization named with its id), before ``-m``
+    selects."""
+    for item in items:
+        path, _, rest = item.nodeid.partition("::")
+        test = f"{path.split('/')[-1]}::{rest}"
+        if test in LONG or test.split("[")[0] in LONG:
+            item.add_marker(pytest.mark.slow)
