@@ -58,6 +58,8 @@ LONG = {
     "test_precision_and_records.py::test_float32_failure_message_names_the_precision",
     "test_readme.py::test_example_runs_as_written[docs/gradients.md: Gradients through whole trajectories]",
     "test_readme.py::test_example_runs_as_written[docs/sweeps-and-devices.md: Sweeps]",
+    "test_readme.py::test_example_runs_as_written[docs/own-model.md: 4. From Python]",
+    "test_event_gradients.py::test_other_schemes_event_gradient[DSn]",
     "test_rigid_box.py::test_free_flight_conserves_energy_and_angular_momentum",
     "test_rigid_box.py::test_flight_before_impact_matches_rigid_body_ode",
     "test_studies.py::test_vmap_over_step_sizes_equals_separate_runs",
