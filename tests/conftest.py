@@ -22,6 +22,22 @@ def _compilation_cache(tmp_path_factory):
     os.environ[ENV] = str(tmp_path_factory.mktemp("xla_cache"))
 
 
+@pytest.fixture
+def no_compilation(monkeypatch):
+    """Any attempt to lower or compile a run's programs fails the test: for
+    tests that input is refused before anything is compiled."""
+    import nsga_jax._simulate as simulate_module
+
+    class Forbidden:
+        def lower(self, *args, **kwargs):
+            raise AssertionError("compilation started before validation finished")
+
+        __call__ = lower
+
+    monkeypatch.setattr(simulate_module, "_prepare_and_init", Forbidden())
+    monkeypatch.setattr(simulate_module, "_run_chunk_jit", Forbidden())
+
+
 LONG = {
     # Tests of 4 s or more on a 2-core machine (pytest --durations), run by `pytest -m slow`
     # (CI runs both suites); each feature keeps a quicker test in the default run.

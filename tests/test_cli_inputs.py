@@ -6,7 +6,6 @@ import argparse
 
 import pytest
 
-import nsga_jax._simulate as simulate_module
 from nsga_jax.cli import EXIT_INPUT, _parser, main
 
 MALFORMED = ("abc", "-1", "nan", "1e999", "")
@@ -66,18 +65,7 @@ def command(cmd: str, option: str | None, value: str, tmp_path) -> list[str]:
     return args
 
 
-@pytest.fixture(autouse=True)
-def no_compilation(monkeypatch):
-    """A malformed value must be refused before anything is compiled."""
-
-    class Forbidden:
-        def lower(self, *args, **kwargs):
-            raise AssertionError("compilation started before validation finished")
-
-        __call__ = lower
-
-    monkeypatch.setattr(simulate_module, "_prepare_and_init", Forbidden())
-    monkeypatch.setattr(simulate_module, "_run_chunk_jit", Forbidden())
+pytestmark = pytest.mark.usefixtures("no_compilation")  # a malformed value is refused before compiling
 
 
 def test_every_value_option_is_covered():

@@ -12,19 +12,7 @@ import nsga_jax as nj
 import nsga_jax._simulate as simulate_module
 from nsga_jax.scenes import REGISTRY, load_scene
 
-
-@pytest.fixture(autouse=True)
-def no_compilation(monkeypatch):
-    """Any attempt to lower/compile during these tests is a failure."""
-
-    class Forbidden:
-        def lower(self, *args, **kwargs):
-            raise AssertionError("compilation started before validation finished")
-
-        __call__ = lower
-
-    monkeypatch.setattr(simulate_module, "_prepare_and_init", Forbidden())
-    monkeypatch.setattr(simulate_module, "_run_chunk_jit", Forbidden())
+pytestmark = pytest.mark.usefixtures("no_compilation")  # (tests/conftest.py)
 
 
 def refused(match, fn, *args, **kwargs):
