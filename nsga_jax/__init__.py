@@ -49,6 +49,7 @@ _LAZY = {
     "Trajectory": "._trajectory",
     "trajectory": "._trajectory",
     "Tolerances": ".monitors",
+    "check_model": ".models.check",
     "InvariantWarning": "._simulate",
 }
 _MODULES = ("scenes",)
@@ -95,6 +96,7 @@ __all__ = [
     "scenes",
     "load_scene",
     "Tolerances",
+    "check_model",
     "Trajectory",
     "trajectory",
 ]

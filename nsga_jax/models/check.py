@@ -1,0 +1,132 @@
+"""``check_model``: a model's declared structure against its own functions.
+
+A model declares its sizes and structure by hand (``n_dof``, ``constant_mass``,
+``linear_force``, ``velocity_dependent_force``, ``linear_constraints``,
+``bandwidth``) and the integrator trusts them: a constant mass is evaluated
+once, a linear force's tangents are formed once, affine constraints keep one
+Jacobian, a band is used for products. A flag the functions do not obey is
+silently wrong physics. :func:`check_model` evaluates the functions at random
+states around ``q`` and ``v`` (with ``jax.jacfwd`` for the derivatives) and
+names every declaration they contradict.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..results import ConfigError
+from .base import Model
+
+RELATIVE = 1e-8
+"""Two evaluations differ when they differ by more than this, relative to their size."""
+
+
+def _differ(a, b) -> float:
+    """The largest difference of two arrays relative to their size (0 when equal)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    scale = max(float(np.abs(a).max(initial=0.0)), float(np.abs(b).max(initial=0.0)), 1e-300)
+    return float(np.abs(a - b).max(initial=0.0)) / scale
+
+
+def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 3, seed: int = 0,
+                spread: float = 0.1) -> list[str]:
+    """Compare every declared size and structure flag of ``model`` with its
+    functions at ``samples`` random states near ``(q, v)`` (default: zeros)
+    and return what was checked; raise :class:`~nsga_jax.ConfigError` naming
+    the first flag or size the functions contradict.
+
+    Checked: the shapes of ``mass`` (n, n), ``force`` (n,), ``bilateral``
+    (nb,), ``unilateral`` (nu,) and ``restitution`` (nu,); ``mass_product``
+    and ``tangents`` against ``mass`` and ``jax.jacfwd(force)``;
+    ``constant_mass``, ``linear_force`` (K and C the same at every state),
+    ``velocity_dependent_force=False`` (no ∂f/∂v), ``linear_constraints``
+    (the same g_q at every state) and a declared ``bandwidth`` (M and K zero
+    outside the band).
+
+    Args:
+        q, v: the state to sample around, shape (n,) (default zeros).
+        t: the time at which the force is evaluated [s].
+        samples: random states compared, each ``q + spread N(0, 1)``.
+    """
+    n, nb, nu = model.n_dof, model.n_bilateral, model.n_unilateral
+    cls = type(model).__name__
+    q0 = jnp.zeros(n) if q is None else jnp.asarray(q, float)
+    v0 = jnp.zeros(n) if v is None else jnp.asarray(v, float)
+    time = jnp.asarray(t, float)
+    rng = np.random.default_rng(seed)
+    states = [(q0 + spread * jnp.asarray(rng.standard_normal(n)), v0 + spread * jnp.asarray(rng.standard_normal(n)))
+              for _ in range(max(2, samples))]
+
+    def fail(flag: str, what: str) -> None:
+        raise ConfigError(f"{cls}.{flag}: {what}")
+
+    expected = {"mass": (n, n), "force": (n,), "bilateral": (nb,), "unilateral": (nu,)}
+    qs, vs = states[0]
+    got = {"mass": model.mass(qs).shape, "force": model.force(qs, vs, time).shape,
+           "bilateral": model.bilateral(qs).shape, "unilateral": model.unilateral(qs).shape}
+    for name, shape in expected.items():
+        if tuple(got[name]) != shape:
+            size = {"mass": "n_dof", "force": "n_dof", "bilateral": "n_bilateral", "unilateral": "n_unilateral"}[name]
+            fail(size, f"{name}() has shape {tuple(got[name])}, where the declared sizes say {shape}")
+    if tuple(jnp.shape(model.restitution)) != (nu,):
+        fail("n_unilateral", f"restitution has shape {tuple(jnp.shape(model.restitution))}, expected ({nu},)")
+    checked = ["sizes"]
+
+    masses, stiffness, damping, jacobians = [], [], [], []
+    for qs, vs in states:
+        M = model.mass(qs)
+        x = vs
+        if _differ(model.mass_product(qs, x), M @ x) > RELATIVE:
+            fail("mass_product", f"M(q) x differs from mass(q) @ x by {_differ(model.mass_product(qs, x), M @ x):.2e} "
+                                 "(relative)")
+        K = -jax.jacfwd(model.force, argnums=0)(qs, vs, time)
+        C = -jax.jacfwd(model.force, argnums=1)(qs, vs, time)
+        K_model, C_model = model.tangents(qs, vs, time)
+        if _differ(K_model, K) > 1e-6:
+            fail("tangents", f"K differs from -d(force)/dq (jax.jacfwd) by {_differ(K_model, K):.2e} (relative)")
+        if model.velocity_dependent_force and _differ(C_model, C) > 1e-6:
+            fail("tangents", f"C differs from -d(force)/dv (jax.jacfwd) by {_differ(C_model, C):.2e} (relative)")
+        masses.append(M)
+        stiffness.append(K)
+        damping.append(C)
+        if nb + nu:
+            jacobians.append(model.constraint_jacobian(qs))
+    checked += ["mass_product", "tangents"]
+
+    if not model.velocity_dependent_force:
+        worst = max(float(jnp.abs(C).max(initial=0.0)) for C in damping)
+        if worst > 0.0:
+            fail("velocity_dependent_force", f"declared False, but the force depends on v (|df/dv| up to {worst:.3g})")
+        checked.append("velocity_dependent_force")
+    if model.constant_mass:
+        change = max(_differ(M, masses[0]) for M in masses[1:])
+        if change > RELATIVE:
+            fail("constant_mass", f"declared True, but M(q) changes with q (by {change:.2e}, relative)")
+        checked.append("constant_mass")
+    if model.linear_force:
+        change = max(max(_differ(K, stiffness[0]), _differ(C, damping[0]))
+                     for K, C in zip(stiffness[1:], damping[1:]))
+        if change > RELATIVE:
+            fail("linear_force", f"declared True, but the tangents K, C change with (q, v) (by {change:.2e}, "
+                                 "relative)")
+        checked.append("linear_force")
+    if model.linear_constraints and jacobians:
+        change = max(_differ(G, jacobians[0]) for G in jacobians[1:])
+        if change > RELATIVE:
+            fail("linear_constraints", f"declared True, but the constraint Jacobian g_q changes with q (by "
+                                       f"{change:.2e}, relative)")
+        checked.append("linear_constraints")
+    b = model.bandwidth
+    if b is not None:
+        outside = np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > b
+        for name, A in (("M", masses[0]), ("K", stiffness[0]), ("C", damping[0])):
+            worst = float(np.abs(np.asarray(A))[outside].max(initial=0.0))
+            if worst > 0.0:
+                fail("bandwidth", f"declared {b}, but {name} has entries up to {worst:.3g} outside that band")
+        checked.append("bandwidth")
+    return checked
+
+
+__all__ = ["check_model"]
