@@ -368,6 +368,10 @@ def _claim(out_dir: Path, scene, grid, hs, overrides, batch_size: int, n: int, m
                     listed = "; ".join(f"{k}: {found.get(k)!r} there, {wanted.get(k)!r} now" for k in differ)
                     problem = (f"{out_dir} holds another sweep ({manifest}), which a resume would mix with this "
                                f"one; they differ in {listed}. Use another folder, or remove it")
+        elif any((out_dir / "batches").glob("batch_*.csv")):
+            problem = (f"{out_dir / 'batches'} holds batch files but {manifest.name} is missing: whose sweep they "
+                       "are is unknown, and a resume would mix them with this one; remove them or choose another "
+                       "folder")
         else:
             (out_dir / "batches").mkdir(parents=True, exist_ok=True)
             manifest.write_text(json.dumps(spec, indent=2) + "\n")
@@ -391,10 +395,15 @@ def _read_batch(path: Path, batch: list[Member]) -> list[dict]:
                           f"({len(rows)} rows), where this sweep's batch holds runs {expected[0]}..{expected[-1]} "
                           f"({len(expected)} rows): it is incomplete or from another sweep; delete it to run that "
                           "batch again")
-    for r in rows:
-        if r.get("result") in (None, "") or any(r.get(k) in (None, "") for k in batch[0].values):
+    for r, m in zip(rows, batch):
+        if r.get("result") in (None, "") or any(r.get(k) in (None, "") for k in m.values):
             raise ConfigError(f"batch file {path} has an incomplete row (run {r.get('member')}); delete it to "
                               "run that batch again")
+        differ = [k for k, v in m.values.items() if not math.isclose(float(r[k]), v, rel_tol=1e-12, abs_tol=0.0)]
+        if differ:
+            raise ConfigError(f"batch file {path}: run {m.index} has {differ[0]} = {r[differ[0]]} there, "
+                              f"{m.values[differ[0]]} in this sweep: it is another sweep's; delete it to run that "
+                              "batch again")
     return rows
 
 

@@ -54,6 +54,7 @@ LONG = {
     "test_gradients.py::test_spectral_radius_is_differentiable",
     "test_identify.py::test_cli_identify_synthetic_then_from_file",
     "test_identify.py::test_adam_also_descends",
+    "test_identify.py::test_a_start_30_percent_above_recovers_the_restitution",
     "test_newton.py::test_gradients_with_reused_factorisations",
     "test_newton.py::test_reused_subproblems_are_those_left_non_constant",
     "test_newton.py::test_a_batch_with_held_factorisations_equals_single_runs",

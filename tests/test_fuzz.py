@@ -265,3 +265,20 @@ def test_run_files_are_what_the_claim_checks(tmp_path):
     assert main(["run", "bouncing_ball", "--t-end", "0.05", "--out", str(out), "--quiet"]) == 0
     written = {p.name for p in Path(out).iterdir()}
     assert written <= set(RUN_FILES), written - set(RUN_FILES)
+
+
+def test_batch_files_of_another_sweep_are_never_read_as_this_ones(tmp_path, capsys):
+    out = tmp_path / "s"
+    assert main(SWEEP + ["--out", str(out)]) == 0
+    (out / "sweep.json").unlink()  # batch files without the description of their sweep
+    assert main(SWEEP + ["--out", str(out)]) == EXIT_INPUT
+    assert_matches(r"holds batch files but sweep.json is missing", error_line(capsys))
+    other = tmp_path / "other"
+    assert main(["sweep", "bouncing_ball", "--grid", "e=0.4;0.7", *SWEEP[4:], "--out", str(other)]) == 0
+    (out / "batches" / "batch_00000.csv").unlink()
+    (out / "batches" / "batch_00001.csv").unlink()
+    for k in (0, 1):  # another sweep's batches, same run numbers
+        (out / "batches" / f"batch_0000{k}.csv").write_bytes((other / "batches" / f"batch_0000{k}.csv").read_bytes())
+    (out / "sweep.json").write_text((other / "sweep.json").read_text().replace("0.4", "0.3").replace("0.7", "0.6"))
+    assert main(SWEEP + ["--out", str(out)]) == EXIT_INPUT
+    assert_matches(r"run 0 has e = 0.4 there, 0.3 in this sweep: it is another sweep's", error_line(capsys))

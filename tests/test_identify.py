@@ -96,3 +96,32 @@ def test_cli_identify_synthetic_then_from_file(tmp_path, capsys):
 def test_cli_identify_bad_input(args, match, capsys, tmp_path):
     assert main(["identify", "bouncing_ball", *args, "--out", str(tmp_path)]) == 2
     assert match in capsys.readouterr().err
+
+
+def test_a_start_30_percent_above_recovers_the_restitution():
+    """The fit that once stopped at e = 9e-17 reporting success (its first step
+    clipped to e = 0, where the gradient vanishes): from e = 0.82 for a true
+    0.63, e is recovered within 1 %, and the fit says it converged."""
+    data = synthetic_data("bouncing_ball", {"e": 0.63}, ["z"])
+    result = identify("bouncing_ball", ["e"], data, initial={"e": 0.82})
+    assert abs(result.recovered["e"] / 0.63 - 1) < 1e-2
+    assert result.converged and result.summary()["converged"]
+
+
+def test_a_fit_stopped_on_a_flat_bound_is_reported_as_failed(monkeypatch, tmp_path, capsys):
+    """With unbounded steps the first one lands on the bound e = 0 (no rebound,
+    no gradient): the fit must say so, and the command line exit 1."""
+    import nsga_jax.identify as identify_module
+
+    monkeypatch.setattr(identify_module, "MAX_STEP", 10.0)
+    data = synthetic_data("bouncing_ball", {"e": 0.63}, ["z"])  # the scene's defaults: 3 s at h = 1e-3 s
+    result = identify("bouncing_ball", ["e"], data, initial={"e": 0.82})
+    assert result.recovered["e"] == 0.0 and result.stop == "bound" and not result.converged
+    assert "bound" in result.stop_message and result.at_bounds == ["e"]
+    out = tmp_path / "id"
+    rc = main(["identify", "bouncing_ball", "--params", "e", "--synthetic", "--true", "e=0.63", "--initial", "e=0.82",
+               "--out", str(out)])
+    assert rc == 1
+    assert "error: the fit did not converge: stopped because it stopped on a bound" in capsys.readouterr().err
+    report = json.loads((out / "identification.json").read_text())
+    assert report["converged"] is False and report["stopped_by"] == "bound"
