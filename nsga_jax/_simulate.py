@@ -16,15 +16,12 @@ counted).
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
 import math
 import sys
 import time
 import warnings as _warnings
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
-from typing import Any, TypeVar, cast
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -33,11 +30,10 @@ import numpy as np
 from jax import lax
 
 from .compilation_cache import cache_events, compile_source
+from .diagnosis import CAPPED, FLOAT32_HINT, NONFINITE, nonfinite_origin
 from .integrators.base import (
     AbstractScheme,
-    Operators,
     StepOutput,
-    StepState,
     output_template,
     pack_output,
     packed_sizes,
@@ -45,7 +41,9 @@ from .integrators.base import (
 )
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
+from .precision import DTYPES, _cast, precision
 from .results import SUBPROBLEMS, ConvergenceError, InvariantError, Result
+from .solution import Observe, Solution, _float64_view
 from .validation import (
     check_initial_state,
     check_memory,
@@ -59,103 +57,6 @@ from .validation import (
     step_count,
     time_grid,
 )
-
-Observe = Callable[["Solution"], dict[str, np.ndarray]]
-
-
-
-@dataclass
-class Solution:
-    """A trajectory and what the scheme did to get it (NumPy arrays, host side).
-
-    Every per-time array has a leading axis of length N + 1 (the initial state
-    first), or, with ``record_every = k > 1``, one entry per k steps plus the
-    initial and the last step. Record fields (``impulse``, ``nu``, ``lam``,
-    ``iterations``, ``result``...) are zero at index 0. ``stats`` and
-    ``failed_steps`` always cover every step.
-
-    Attributes:
-        ts: times [s], (N+1,).
-        q, v: coordinates and velocities, (N+1, n).
-        records: :class:`~nsga_jax.integrators.ds.StepOutput` with NumPy leaves, (N+1, ...).
-        observables: named scene quantities, each (N+1,).
-        h: step size [s]; n_steps: steps actually taken (fewer than requested
-            when a failure stopped the run).
-        result: the first failure's :class:`Result` (``successful`` if none).
-        totals: statistics over every step (accumulated while running; computed
-            from ``records`` when not given).
-        stats: iteration statistics, failures, constraint violations, timings.
-    """
-
-    ts: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    records: StepOutput
-    h: float
-    n_steps: int
-    n_steps_requested: int
-    result: Result
-    wall_time: float
-    compile_time: float
-    observables: dict[str, np.ndarray] = field(default_factory=dict)
-    totals: RunTotals | None = None
-    warnings: list[str] = field(default_factory=list)
-    compile_source: str = "compiled"
-
-    def __post_init__(self):
-        if self.totals is None:
-            self.totals = RunTotals()
-            self.totals.add(jax.tree_util.tree_map(lambda x: np.asarray(x)[1:], self.records), first_step=1)
-
-    @property
-    def iterations(self) -> np.ndarray:
-        """Newton iterations (N+1, 3): smooth, position, velocity."""
-        return np.asarray(self.records.iterations)
-
-    @property
-    def failed_steps(self) -> np.ndarray:
-        """Step numbers k (t = t0 + k h) of the steps whose result is not
-        successful; indices into ``ts`` when every step is recorded."""
-        assert self.totals is not None  # set by __post_init__
-        return np.asarray(self.totals.failed, dtype=int)
-
-    @property
-    def impulse(self) -> np.ndarray:
-        """Constraint impulses Λ [N s], (N+1, nc), bilaterals first."""
-        return np.asarray(self.records.impulse)
-
-    @property
-    def gap(self) -> np.ndarray:
-        """Unilateral gaps g^U(q) [m], (N+1, nu)."""
-        return np.asarray(self.records.gap)
-
-    @property
-    def stats(self) -> dict:
-        tot = self.totals
-        assert tot is not None  # set by __post_init__
-        n = max(tot.n_steps, 1)
-        stats: dict[str, Any] = {
-            "n_steps": int(self.n_steps),
-            "h": float(self.h),
-            "wall_time_s": float(self.wall_time),
-            "compile_time_s": float(self.compile_time),
-            "compile_source": self.compile_source,
-            "us_per_step": 1e6 * float(self.wall_time) / max(int(self.n_steps), 1),
-            "iterations": {
-                name: {"mean": float(tot.iterations_sum[i] / n), "max": int(tot.iterations_max[i])}
-                for i, name in enumerate(("smooth", "position", "velocity"))
-            },
-            "failed_steps": len(tot.failed),
-            "result": self.result.name,
-            "max_penetration": float(max(0.0, -tot.min_gap)),
-            "max_bilateral_violation_position": float(tot.max_bilateral),
-            "max_bilateral_violation_velocity": float(tot.max_bilateral_rate),
-        }
-        stats["iterations"]["linear_solves"] = {"mean": float(tot.solves_sum / n), "max": int(tot.solves_max)}
-        stats["energy"] = tot.energy_stats()
-        stats["warnings"] = list(self.warnings)
-        return stats
-
 
 # ----------------------------------------------------------------- validation
 # (the checks live in :mod:`nsga_jax.validation`; these names are kept for the
@@ -334,56 +235,6 @@ class InvariantWarning(UserWarning):
     wrong there."""
 
 
-DTYPES = ("float64", "float32")
-
-
-@contextlib.contextmanager
-def precision(dtype: str):
-    """Run the enclosed JAX code in ``dtype`` ("float64" or "float32").
-
-    float32 turns ``jax_enable_x64`` off for the enclosed code and clears JAX's
-    caches on entry and on exit: JAX caches the constants a traced function
-    closes over (NumPy arrays) without their precision, so a function traced in
-    one precision would otherwise be lowered with the other's constants. A
-    float32 run therefore compiles afresh each time.
-    """
-    # JAX's Config defines its options as attributes at run time: none is declared to mypy
-    if dtype == "float64" and jax.config.jax_enable_x64:  # type: ignore[attr-defined]
-        yield
-        return
-    jax.clear_caches()
-    try:
-        with jax.enable_x64(dtype == "float64"):
-            yield
-    finally:
-        jax.clear_caches()
-
-
-_Tree = TypeVar("_Tree")
-
-
-def _cast(tree: _Tree, dtype: str) -> _Tree:
-    """Every floating-point leaf of ``tree`` (arrays and NumPy scalars) as ``dtype``."""
-
-    def cast(x):
-        return jnp.asarray(x, dtype) if eqx.is_inexact_array(x) or isinstance(x, np.floating) else x
-
-    return jax.tree_util.tree_map(cast, tree)
-
-
-def _float64_view(sol: Solution) -> Solution:
-    """``sol`` with its floating-point arrays in float64 (itself if they are)."""
-    if sol.q.dtype == np.float64:
-        return sol
-
-    def up(x):
-        x = np.asarray(x)
-        return x.astype(np.float64) if np.issubdtype(x.dtype, np.floating) else x
-
-    return dataclasses.replace(sol, ts=up(sol.ts), q=up(sol.q), v=up(sol.v),
-                               records=jax.tree_util.tree_map(up, sol.records))
-
-
 def _energy_of(model: Model):
     """``(q, v) -> energies`` over a chunk's steps (jitted), or ``None``."""
     if not model.has_energy:
@@ -503,45 +354,6 @@ def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
               else nonfinite_origin(ops, state0) if result in NONFINITE else ""),
     )
     return sol, err
-
-
-CAPPED = (Result.smooth_max_iter, Result.position_max_iter, Result.velocity_max_iter, Result.coupled_max_iter)
-FLOAT32_HINT = (
-    "The run is in float32 (eps = 1.2e-7): if the residual is within a few hundred eps of the size of "
-    "its terms, the limit is the precision; rerun in float64."
-)
-NONFINITE = (Result.smooth_nonfinite, Result.position_nonfinite, Result.velocity_nonfinite)
-
-OPERATOR_NAMES = {
-    "M": "the mass matrix", "K": "the stiffness matrix", "C": "the damping matrix",
-    "G": "the constraint Jacobian",
-    "smooth_inv": "the inverted iteration matrix of the smooth motion sub-problem",
-    "position_inv": "the inverted iteration matrix of the position correction",
-    "velocity_inv": "the inverted iteration matrix of the velocity jump",
-}
-
-
-def nonfinite_origin(ops: Operators, initial: StepState) -> str:
-    """Why a run met a non-finite value, when it was there before the first
-    step: a constant operator computed once for the step size (an inverted
-    iteration matrix is not finite when the matrix is singular), or the
-    initial acceleration (M(q0) singular, or f(q0, v0, t0) not finite).
-    Checked on the host only after a failure, so it costs a run nothing.
-    Returns ``""`` when both are finite."""
-
-    def finite(tree) -> bool:
-        return all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(tree))
-
-    bad = [OPERATOR_NAMES[f.name] for f in dataclasses.fields(ops)
-           if f.name in OPERATOR_NAMES and getattr(ops, f.name) is not None and not finite(getattr(ops, f.name))]
-    causes = []
-    if bad:
-        listed = bad[0] if len(bad) == 1 else ", ".join(bad[:-1]) + " and " + bad[-1]
-        causes.append(f"{listed} (computed once for this h) {'is' if len(bad) == 1 else 'are'} not finite: "
-                      "a singular matrix (a coordinate with neither mass nor stiffness?)")
-    if not finite(initial.vd):
-        causes.append("the initial acceleration is not finite (M(q0) singular, or f(q0, v0, t0) not finite)")
-    return ("Before the first step, " + "; ".join(causes) + ".") if causes else ""
 
 
 def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> tuple[StepOutput, np.ndarray]:

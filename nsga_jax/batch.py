@@ -29,22 +29,14 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ._simulate import (
-    DTYPES,
-    Observe,
-    RunTotals,
-    Solution,
-    _cast,
-    _float64_view,
-    _prepare_and_init_raw,
-    _prepend_initial,
-    chunk_length,
-    precision,
-)
+from ._simulate import _prepare_and_init_raw, _prepend_initial, chunk_length
 from .integrators.base import AbstractScheme, StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .integrators.linalg import bounded_lapack_batches
 from .models.base import Model
+from .monitors import RunTotals
+from .precision import DTYPES, _cast, precision
 from .results import ConfigError, Result
+from .solution import Observe, Solution, _float64_view
 from .validation import (
     check_initial_state,
     check_memory,

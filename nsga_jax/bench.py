@@ -26,10 +26,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._simulate import _cast, precision
 from .batch import BatchRun, broadcast_members
 from .compilation_cache import compilation_cache
 from .metrics import relative_l1_error
+from .precision import _cast, precision
 from .results import ConfigError
 from .scenes.base import REGISTRY, Scene, load_scene
 from .validation import step_count

@@ -18,9 +18,9 @@ from typing import Any, cast
 import numpy as np
 
 from . import plotting
-from ._simulate import Solution
 from .integrators.base import StepOutput
 from .results import ConfigError
+from .solution import Solution
 
 RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bilateral_rate",
                  "iterations", "residual", "result")

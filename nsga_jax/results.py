@@ -11,7 +11,7 @@ import enum
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ._simulate import Solution
+    from .solution import Solution
 
 SUBPROBLEMS = ("smooth motion", "position correction", "velocity jump")
 COUPLED = "coupled iteration"

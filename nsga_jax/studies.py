@@ -19,11 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from . import plotting
-from ._simulate import Solution, simulate
+from ._simulate import simulate
 from .batch import simulate_batch
 from .metrics import observed_order, relative_l1_error
 from .results import ConfigError
 from .scenes.base import Scene, load_scene
+from .solution import Solution
 from .tables import write_csv
 from .validation import step_count
 

@@ -34,12 +34,14 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._simulate import RunTotals, Solution, _cast, _float64_view, precision
 from .batch import BatchRun, member_mesh, member_solution, stack_models
 from .distributed import agree
 from .metrics import relative_l1_error
+from .monitors import RunTotals
+from .precision import _cast, precision
 from .results import ConfigError
 from .scenes.base import Configured, Scene, configure
+from .solution import Solution, _float64_view
 from .tables import read_csv, write_csv
 from .validation import step_count
 

@@ -18,9 +18,9 @@ from ..results import ConfigError
 from .params import SOLVER_PARAMS, Param, check_all, check_solver
 
 if TYPE_CHECKING:  # the numerical modules load (with JAX) only when a scene is built or run
-    from .._simulate import Solution
     from ..integrators.base import AbstractScheme
     from ..models.base import Model
+    from ..solution import Solution
 
 
 @dataclass
