@@ -1,0 +1,139 @@
+"""The command line's options: one argparse parser per subcommand, with
+one-line errors (``error: ...``, exit 2) instead of a usage block.
+
+Importing this module loads no JAX: ``nsga-jax --help`` answers at once."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import cast
+
+from .results import ConfigError
+
+CACHE_ENV = "NSGA_JAX_CACHE"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``error: ...``, exit 2) instead of a
+    usage block."""
+
+    def error(self, message: str):
+        raise ConfigError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="nsga-jax", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+    cached = argparse.ArgumentParser(add_help=False)
+    cached.add_argument("--no-cache", action="store_true",
+                        help="compile afresh and keep nothing on disk (default: compiled programs are kept in "
+                             f"${CACHE_ENV} or ~/.cache/nsga_jax/xla, and a later run of the same scene structure, "
+                             "with any h and parameter values, loads them instead of compiling)")
+    # typeshed wants parents of the subparsers' own class (_Parser); argparse copies any parser's arguments
+    parents = cast(list[_Parser], [cached])
+
+    run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=parents)
+    run.add_argument("scene", help="scene name (see `nsga-jax scenes`), a .toml config, or a .py file that registers "
+                                   "a scene (file.py:NAME picks one of several)")
+    run.add_argument("--h", type=float, help="step size [s]")
+    run.add_argument("--t-end", type=float, help="end time [s]")
+    run.add_argument("--rho-inf", type=float, help="spectral radius at infinity, in [0, 1]")
+    run.add_argument("--scheme", choices=("ds", "dsn", "cs", "mj"), help="time integration scheme")
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                     help="override a config key (repeatable), e.g. --set e=0.5")
+    run.add_argument("--dtype", choices=("float64", "float32"), help="floating-point precision (default float64)")
+    run.add_argument("--record-every", type=int, metavar="K",
+                     help="keep every K-th step in memory and in trajectory.npz; every step still goes to "
+                          "DIR/steps/ and into the statistics (flat memory for long runs)")
+    run.add_argument("--no-throw", action="store_true",
+                     help="keep going past an unconverged step and mark it in the results")
+    run.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>, or nsga_out/<scene>_2, ... "
+                                              "when it holds an earlier run); a folder holding an earlier run is "
+                                              "refused unless --overwrite")
+    run.add_argument("--overwrite", action="store_true", help="replace the earlier run in --out")
+    run.add_argument("--strict", action="store_true",
+                     help="fail (exit 1) when the energy rises at an impact past its tolerance (default: a warning)")
+    run.add_argument("--chunk", type=int, default=None, help="steps per compiled chunk")
+    run.add_argument("--quiet", action="store_true", help="no progress output")
+
+    conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size",
+                          parents=parents)
+    conv.add_argument("scene", help="scene name or .toml config")
+    conv.add_argument("--scheme", default="ds", help="comma-separated schemes (ds, dsn, cs, mj)")
+    conv.add_argument("--h", required=True, help="comma-separated step sizes [s]")
+    ref = conv.add_mutually_exclusive_group(required=True)
+    ref.add_argument("--ref-h", type=float, help="reference: a run at this (much smaller) step")
+    ref.add_argument("--ref", choices=("exact",), help="reference: the scene's exact solution")
+    conv.add_argument("--ref-scheme", default="ds", help="scheme of the reference run (default ds)")
+    conv.add_argument("--t-end", type=float, help="end of the time window [s]")
+    conv.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
+    conv.add_argument("--observables", help="comma-separated observables (default: the scene's)")
+    conv.add_argument("--mode", choices=("grouped", "padded", "separate"), default="grouped",
+                      help="how the step sizes run: vmap over groups of similar step counts (default), one "
+                           "padded vmap, or separate runs (see experiments/benchmarks/bench_batch_h.py)")
+    conv.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_convergence)")
+
+    ident = sub.add_parser("identify", help="fit scene parameters to measured (or synthetic) motion by "
+                                            "gradient descent through the simulation", parents=parents)
+    ident.add_argument("scene", help="scene name or .toml config")
+    ident.add_argument("--params", required=True, help="comma-separated float parameters to identify, e.g. E,e")
+    source = ident.add_mutually_exclusive_group(required=True)
+    source.add_argument("--data", type=Path, help="measured data: .csv (header t,OBS,...) or .npz (t, OBS...)")
+    source.add_argument("--synthetic", action="store_true",
+                        help="make the data by simulating the scene with the --true values")
+    ident.add_argument("--true", action="append", default=[], metavar="KEY=VALUE",
+                       help="true parameter value for --synthetic (repeatable; default: the scene's)")
+    ident.add_argument("--initial", action="append", default=[], metavar="KEY=VALUE",
+                       help="starting value (repeatable; default: the scene's)")
+    ident.add_argument("--observables", help="observables to fit for --synthetic (default: the scene's first)")
+    ident.add_argument("--noise", type=float, default=0.0,
+                       help="--synthetic: Gaussian noise, as a fraction of each observable's RMS")
+    ident.add_argument("--every", type=int, default=1, help="--synthetic: keep every n-th step as a sample")
+    ident.add_argument("--seed", type=int, default=0, help="--synthetic: seed of the noise")
+    ident.add_argument("--optimizer", choices=("lbfgs", "adam"), default="lbfgs")
+    ident.add_argument("--adjoint", choices=("event", "discrete"), default="event",
+                       help="gradients that see impact instants move (default), or the time-stepping "
+                            "map's own derivative")
+    ident.add_argument("--max-steps", type=int, default=100, help="optimiser iterations at most")
+    ident.add_argument("--learning-rate", type=float, default=0.05, help="Adam's step (scaled parameters)")
+    ident.add_argument("--h", type=float, help="step size [s]")
+    ident.add_argument("--t-end", type=float, help="--synthetic: end time [s]")
+    ident.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
+    ident.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_identify)")
+
+    sw = sub.add_parser("sweep", help="run a scene for every combination of parameter values and step sizes "
+                                      "(batched, split over every device, resumable)", parents=parents)
+    sw.add_argument("scene", help="scene name or .toml config")
+    sw.add_argument("--grid", required=True,
+                    help="swept float parameters, e.g. 'e=0:1:11,E=800:1000:5' (start:stop:count) or 'e=0.2;0.5'")
+    sw.add_argument("--h", help="comma-separated step sizes [s] (default: the scene's)")
+    sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="fixed config value for every run (repeatable)")
+    sw.add_argument("--batch-size", type=int, help="runs per compiled batch (default: from the model's size)")
+    sw.add_argument("--devices", type=int, help="use the first N devices (default: all)")
+    sw.add_argument("--max-records", type=int, default=2000,
+                    help="recorded steps kept per run for observables and errors (default 2000)")
+    sw.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_sweep); "
+                                             "run again to resume an interrupted sweep")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    hosts = sw.add_argument_group("several processes or hosts (jax.distributed; start the same command in each)")
+    hosts.add_argument("--coordinator", metavar="HOST:PORT", help="address where process 0 listens")
+    hosts.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
+    hosts.add_argument("--process-id", type=int, metavar="I", help="this process's index, in [0, N)")
+
+    bn = sub.add_parser("bench", help="time per step, batched throughput, compile time, float32 vs float64")
+    bn.add_argument("--scenes", help="comma-separated scenes (default: all)")
+    bn.add_argument("--batch", default="1,64,1024", help="comma-separated batch sizes (default 1,64,1024)")
+    bn.add_argument("--dtype", default="float64,float32", help="comma-separated precisions")
+    bn.add_argument("--scheme", choices=("ds", "dsn", "cs", "mj"), default="ds")
+    bn.add_argument("--repeats", type=int, default=3, help="runs per configuration; the fastest counts")
+    bn.add_argument("--max-steps", type=int, default=2000, help="steps per run at most (default 2000)")
+    bn.add_argument("--max-seconds", type=float, default=60.0,
+                    help="skip a batch whose estimated run time exceeds this (default 60 s)")
+    bn.add_argument("--out", type=Path, default=Path("nsga_out/bench"), help="output folder (bench.csv, bench.md)")
+
+    sub.add_parser("scenes", help="list the built-in scenes and their parameters")
+    cfg = sub.add_parser("config", help="print a scene's default TOML config")
+    cfg.add_argument("scene")
+    return p
