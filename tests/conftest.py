@@ -41,7 +41,12 @@ def no_compilation(monkeypatch):
 LONG = {
     # Tests of 4 s or more on a 2-core machine (pytest --durations), run by `pytest -m slow`
     # (CI runs both suites); each feature keeps a quicker test in the default run.
+    "test_assembly.py::test_fast_path_equals_generic_path",
     "test_cli.py::test_later_runs_load_compiled_programs_from_the_cache",
+    "test_extreme.py::test_box_dropped_flat_lands_on_four_vertices_at_once",
+    "test_extreme.py::test_stiff_bar_at_a_large_step",
+    "test_newton.py::test_reuse_gives_the_trajectory_of_newtons_method",
+    "test_performance.py::test_generic_path_keeps_nothing_constant",
     "test_event_gradients.py::test_pendulum_event_gradient_in_wall_position",
     "test_event_gradients.py::test_ball_event_gradient_converges_to_the_exact_derivative",
     "test_event_gradients.py::test_event_gradient_forward_equals_reverse",
