@@ -341,12 +341,13 @@ def summary_columns(result: SweepResult, scene=None) -> list[str]:
 def plot_sweep(result: SweepResult, path: Path, scene=None, scheme: str | None = None) -> Path:
     """``sweep.png``: the :func:`summary_columns` against one swept value, one
     line per combination of the other swept values (see
-    :func:`nsga_jax.plotting.sweep_figure`), axes in the scene's units.
+    :func:`nsga_jax.sweep_plot.sweep_figure`), axes in the scene's units.
 
     ``scene`` (a name or config) and ``scheme`` name the units and the title;
     by default they are read from ``sweep.json`` beside ``path``, which
     :func:`sweep` writes."""
     from . import plotting
+    from .sweep_plot import sweep_figure
 
     path = Path(path)
     overrides: dict[str, Any] = {}
@@ -363,5 +364,5 @@ def plot_sweep(result: SweepResult, path: Path, scene=None, scheme: str | None =
     if scheme is None:
         scheme = loaded.solver["scheme"] if loaded is not None else ""
     spec = loaded.spec if loaded is not None else scene
-    fig = plotting.sweep_figure(result, summary_columns(result, spec), spec, scheme)
+    fig = sweep_figure(result, summary_columns(result, spec), spec, scheme)
     return plotting.save(fig, path)
