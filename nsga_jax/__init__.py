@@ -31,8 +31,11 @@ from .results import ConfigError, ConvergenceError, InvariantError, Result  # no
 __version__ = "0.1.0"
 
 _LAZY = {
-    "Solution": "._simulate",
+    "Solution": ".solution",
+    "SaveAt": ".saveat",
+    "integrate": "._integrate",
     "simulate": "._simulate",
+    "simulate_batch": ".batch",
     "AbstractScheme": ".integrators.base",
     "StepOutput": ".integrators.base",
     "StepState": ".integrators.base",
@@ -46,8 +49,6 @@ _LAZY = {
     "RigidPendulum": ".models",
     "ElasticBar": ".models",
     "load_scene": ".scenes",
-    "Trajectory": "._trajectory",
-    "trajectory": "._trajectory",
     "Tolerances": ".monitors",
     "check_model": ".models.check",
     "InvariantWarning": "._simulate",
@@ -92,11 +93,12 @@ __all__ = [
     "InvariantError",
     "InvariantWarning",
     "Solution",
+    "SaveAt",
+    "integrate",
     "simulate",
+    "simulate_batch",
     "scenes",
     "load_scene",
     "Tolerances",
     "check_model",
-    "Trajectory",
-    "trajectory",
 ]

@@ -1,12 +1,14 @@
 """The time loop: ``simulate(model, scheme, t0, t1, h, q0, v0)``.
 
-The whole trajectory runs in compiled loops over chunks of steps
-(one compilation, reused for every chunk); no Python runs inside a chunk. After
-each chunk the host adds the chunk to the run's statistics, keeps its records
-(every ``record_every``-th step of them), reports progress, hands the full
-chunk to an optional callback (the CLI writes it to disk at once), and stops
-early on a failure when ``throw=True``. With ``record_every > 1`` the memory a
-run holds is one chunk plus the kept records: flat for any number of steps.
+The host driver over the step of the pure :func:`~nsga_jax.integrate`; both
+return a :class:`~nsga_jax.Solution`. The whole trajectory runs in compiled
+loops over chunks of steps (one compilation, reused for every chunk); no Python
+runs inside a chunk. After each chunk the host adds the chunk to the run's
+statistics, keeps its records (every ``SaveAt.every``-th step of them), reports
+progress, writes the full chunk to ``SaveAt.chunks`` and hands it to an
+optional callback, and stops early on a failure when ``throw=True``. With
+``SaveAt(every=k > 1)`` the memory a run holds is one chunk plus the kept
+records: flat for any number of steps.
 
 Compile time is measured apart (``lower().compile()``); ``wall_time`` is the
 execution time of the constant-operator preparation, the initialisation and
@@ -43,7 +45,8 @@ from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
 from .precision import DTYPES, _cast, precision
 from .results import SUBPROBLEMS, ConvergenceError, InvariantError, Result
-from .solution import Observe, Solution, _float64_view
+from .saveat import DEVICE_ONLY, SaveAt, refuse
+from .solution import Observables, Solution, host_solution, with_observables
 from .validation import (
     check_initial_state,
     check_memory,
@@ -147,17 +150,22 @@ def simulate(
     q0,
     v0,
     *,
+    saveat: SaveAt = SaveAt(),
     throw: bool = True,
     chunk_size: int | None = None,
     progress: bool = False,
-    on_chunk: Callable[[int, "Solution"], None] | None = None,
-    observe: Observe | None = None,
-    record_every: int = 1,
+    on_chunk: Callable[[int, StepOutput], None] | None = None,
+    observables: Observables | None = None,
     dtype: str = "float64",
     strict: bool = False,
     tolerances: Tolerances | None = None,
 ) -> Solution:
-    """Integrate ``model`` from t0 to t1 [s] with step h [s] by ``scheme``.
+    """Integrate ``model`` from t0 to t1 [s] with step h [s] by ``scheme`` (host driver).
+
+    The same step and the same :class:`~nsga_jax.Solution` as the pure
+    :func:`~nsga_jax.integrate`, driven from the host: progress, chunks
+    written to disk, a named :class:`ConvergenceError`, float32 runs, energy
+    and constraint monitors, timings. The solution's leaves are NumPy arrays.
 
     Args:
         model: the semi-discrete system.
@@ -165,6 +173,13 @@ def simulate(
         t0, t1, h: start and end time and step size [s]; N = floor((t1-t0)/h)
             steps, step k at t0 + k h (computed in float64, never accumulated).
         q0, v0: initial coordinates and velocities, shape (n,).
+        saveat: what to keep (:class:`~nsga_jax.SaveAt`): ``every=k`` keeps
+            the records of every k-th step (and of the last) in the solution,
+            while ``stats``, ``failed_steps``, ``chunks`` and ``on_chunk``
+            still see every step (memory stays flat for long runs);
+            ``chunks=folder`` writes every chunk of steps to that folder as it
+            finishes. ``SaveAt.fn`` is for :func:`~nsga_jax.integrate` and is
+            refused here.
         throw: stop at the first step that fails (Newton cap or NaN/inf) and
             raise :class:`ConvergenceError`; with ``False`` keep going and
             mark failed steps in ``records.result``.
@@ -172,12 +187,11 @@ def simulate(
             the model's size; every chunk, and every run of the same model
             structure whatever its h or parameter values, reuses one compilation).
         progress: print progress on stderr (at most twice a second).
-        on_chunk: called as ``on_chunk(k, partial)`` after chunk k with that
-            chunk's records (a :class:`Solution` of the chunk alone).
-        observe: computes named observables from the finished solution.
-        record_every: keep the records of every k-th step (and of the last) in
-            the solution; ``stats``, ``failed_steps`` and ``on_chunk`` still see
-            every step. Use it for long runs: memory stays flat.
+        on_chunk: called as ``on_chunk(k, records)`` after chunk k with that
+            chunk's records (a :class:`~nsga_jax.StepOutput` of NumPy arrays).
+        observables: ``Solution -> {name: array}``, named quantities computed
+            from the finished solution (a scene's observables), stored in
+            ``Solution.observables``.
         dtype: ``"float64"`` (default) or ``"float32"``: the precision of the
             whole run (model, state, operators, records). In float32 the
             round-off of an assembled stiff force can exceed eq. 51's bound at
@@ -197,12 +211,13 @@ def simulate(
     q0 = state_vector("q0", q0, model.n_dof)
     v0 = state_vector("v0", v0, model.n_dof)
     check_initial_state(model, q0, v0)
-    record_every = integer("record_every", record_every, 1)
+    refuse(saveat, DEVICE_ONLY, "simulate (host driver)", "nsga_jax.integrate, the pure entry point")
+    record_every = saveat.every
     if chunk_size is not None:
         chunk_size = integer("chunk_size", chunk_size, 1)
     for name, value in (("throw", throw), ("progress", progress), ("strict", strict)):
         require_instance(name, value, (bool, np.bool_), "True or False")
-    for name, hook in (("on_chunk", on_chunk), ("observe", observe)):
+    for name, hook in (("on_chunk", on_chunk), ("observables", observables)):
         if hook is not None and not callable(hook):
             raise TypeError(f"{name} must be a function or None, got {type(hook).__name__}")
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
@@ -211,22 +226,36 @@ def simulate(
     check_memory(model.n_dof, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
                  record_numbers=sum(packed_sizes(template)))
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
+    if saveat.chunks is not None:
+        from .output import chunk_files  # only here: the output module loads plotting
+
+        on_chunk = _both(chunk_files(saveat.chunks), on_chunk)
     with precision(dtype):
-        sol, error = _integrate(*_cast((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype), v0.astype(dtype),
-                                throw=throw, chunk_size=chunk_size, progress=progress, on_chunk=on_chunk,
-                                record_every=record_every, dtype=dtype)
-    assert sol.totals is not None  # _integrate accumulates them
-    sol.warnings = warnings + invariant_warnings(sol.totals, tolerances, h, t0)
-    for message in sol.warnings:
+        run, totals, error = _host_loop(*_cast((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
+                                        v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
+                                        on_chunk=on_chunk, record_every=record_every, dtype=dtype)
+    warnings += invariant_warnings(totals, tolerances, h, t0)
+    for message in warnings:
         _warnings.warn(message, InvariantWarning, stacklevel=2)
-    if observe is not None:  # in float64, from the (possibly float32) states
-        sol.observables = {k: np.asarray(v) for k, v in observe(_float64_view(sol)).items()}
+    sol = with_observables(host_solution(**run, totals=totals, warnings=tuple(warnings)), observables)
     if error is not None:
         error.solution = sol
         raise error
     if strict and any(w.startswith(ENERGY_WARNING) for w in sol.warnings):
         raise InvariantError(next(w for w in sol.warnings if w.startswith(ENERGY_WARNING)), sol)
     return sol
+
+
+def _both(first: Callable[[int, StepOutput], None], second: Callable[[int, StepOutput], None] | None):
+    """One ``on_chunk`` callback calling ``first`` then ``second`` (if any)."""
+    if second is None:
+        return first
+
+    def both(k: int, records: StepOutput) -> None:
+        first(k, records)
+        second(k, records)
+
+    return both
 
 
 class InvariantWarning(UserWarning):
@@ -246,11 +275,12 @@ def _energy_of(model: Model):
     return eqx.filter_jit(energies)
 
 
-def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
-               record_every, dtype) -> tuple[Solution, ConvergenceError | None]:
+def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
+               record_every, dtype) -> tuple[dict[str, Any], RunTotals, ConvergenceError | None]:
     """The time loop of :func:`simulate` on validated arguments, in the precision
-    already set by the caller; returns the solution and, when ``throw`` and a
-    step failed, the error to raise."""
+    already set by the caller; returns the solution's pieces (the arguments of
+    :func:`~nsga_jax.solution.host_solution`), the running totals and, when
+    ``throw`` and a step failed, the error to raise."""
     length = chunk_size or chunk_length(model)
     real = np.dtype(dtype).type
 
@@ -322,22 +352,19 @@ def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
 
     records = _prepend_initial(model, chunks, t0, q0, v0)
     ts = t0 + h * np.concatenate([[0], *numbers]).astype(np.float64)
-    sol = Solution(
-        ts=ts,
-        q=np.asarray(records.q),
-        v=np.asarray(records.v),
+    run = dict(
         records=records,
+        ts=ts,
         h=h,
         n_steps=steps_done,
         n_steps_requested=n_steps,
         result=Result.successful if first_failure is None else Result(int(first_failure[1].result[first_failure[2]])),
         wall_time=wall,
         compile_time=compile_time,
-        totals=totals,
         compile_source=compile_source(cached),
     )
     if not (throw and first_failure is not None):
-        return sol, None
+        return run, totals, None
     step, out, i = first_failure
     result = Result(int(out.result[i]))
     if result.subproblem in SUBPROBLEMS:
@@ -353,7 +380,7 @@ def _integrate(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         hint=(FLOAT32_HINT if dtype == "float32" and result in CAPPED
               else nonfinite_origin(ops, state0) if result in NONFINITE else ""),
     )
-    return sol, err
+    return run, totals, err
 
 
 def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> tuple[StepOutput, np.ndarray]:

@@ -36,7 +36,7 @@ from .models.base import Model
 from .monitors import RunTotals
 from .precision import DTYPES, _cast, precision
 from .results import ConfigError, Result
-from .solution import Observe, Solution, _float64_view
+from .solution import Observables, Solution, host_solution, with_observables
 from .validation import (
     check_initial_state,
     check_memory,
@@ -281,9 +281,8 @@ def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float
     else:
         result = Result(int(totals.first_result)) if totals.failed else Result.successful
         n_steps = totals.n_steps
-    return Solution(ts=np.asarray(records.t), q=np.asarray(records.q), v=np.asarray(records.v), records=records,
-                    h=h, n_steps=n_steps, n_steps_requested=n_steps_requested, result=result,
-                    wall_time=run.wall_time, compile_time=run.compile_time, totals=totals)
+    return host_solution(records, ts=np.asarray(records.t), h=h, n_steps=n_steps, n_steps_requested=n_steps_requested,
+                         result=result, totals=totals, wall_time=run.wall_time, compile_time=run.compile_time)
 
 
 def simulate_batch(
@@ -295,18 +294,22 @@ def simulate_batch(
     q0,
     v0,
     *,
-    observe: Observe | None = None,
+    observables: Observables | None = None,
     dtype: str = "float64",
     mesh: Mesh | None = None,
 ) -> list[Solution]:
-    """Integrate one problem with every step size in ``hs`` at once (``vmap``).
+    """Integrate one problem with every step size in ``hs`` at once (``vmap``):
+    the arguments of :func:`~nsga_jax.simulate` in the same order, with a
+    sequence of step sizes ``hs`` [s] in place of h; one
+    :class:`~nsga_jax.Solution` (NumPy leaves) per step size.
 
     Failures never stop the batch (one bad member must not kill a sweep): each
     member's records carry its result codes and ``Solution.result`` its first
     failure. ``wall_time`` and ``compile_time`` are those of the whole batch.
     ``dtype`` is the precision, as in :func:`~nsga_jax.simulate`; ``mesh``
     splits the members over devices (:func:`member_mesh`; the number of step
-    sizes must then be a multiple of the mesh size).
+    sizes must then be a multiple of the mesh size); ``observables`` names
+    quantities of each finished member, as in :func:`~nsga_jax.simulate`.
     """
     check_scheme(scheme)
     check_model(model)
@@ -335,12 +338,8 @@ def simulate_batch(
             for b in range(B):
                 if done[b].any():
                     chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
-    solutions = [member_solution(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype), float(hs[b]),
-                                 int(n_steps[b]), run) for b in range(B)]
-    if observe is not None:
-        for sol in solutions:
-            sol.observables = {k: np.asarray(v) for k, v in observe(_float64_view(sol)).items()}
-    return solutions
+    return [with_observables(member_solution(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype),
+                                             float(hs[b]), int(n_steps[b]), run), observables) for b in range(B)]
 
 
 __all__ = ["BatchRun", "broadcast_members", "member_mesh", "simulate_batch", "stack_models"]

@@ -49,15 +49,16 @@ def _run(args) -> int:
     claim_run_folder(out, {"command": "run", "scene": str(args.scene), "parameters": scene.parameters,
                            "solver": scene.solver}, overwrite=args.overwrite)
     _use_cache(args)
-    from .output import chunk_writer, summary, write_run
+    from .output import summary, write_run
+    from .saveat import SaveAt
 
     if not args.quiet:
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
               f"rho_inf = {s['rho_inf']:g}, {s['dtype']}; output in {out}", file=sys.stderr)
     failure = None
-    writer = chunk_writer(out)
+    saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # every step on disk as it finishes
     try:
-        sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, on_chunk=writer,
+        sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, saveat=saveat,
                         strict=args.strict)
     except (ConvergenceError, InvariantError) as err:
         assert err.solution is not None  # simulate attaches the run to the errors it raises

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ._trajectory import ADJOINTS, trajectory
+from ._integrate import ADJOINTS, integrate
 from .data import Data
 from .results import ConfigError
 from .scenes.base import load_scene, make_scheme, parametrize
@@ -85,8 +85,8 @@ class Identification:
 
 
 def _run(build, scheme, h, n_steps, p, adjoint):
-    model, q0, v0, observe = build(p)
-    return observe(trajectory(model, scheme, 0.0, h, n_steps, q0, v0, adjoint=adjoint))
+    model, q0, v0, observables = build(p)
+    return observables(integrate(model, scheme, 0.0, n_steps * h, h, q0, v0, n_steps=n_steps, adjoint=adjoint))
 
 
 def synthetic_data(scene_name: str, overrides: dict | None, observables, noise: float = 0.0,

@@ -3,8 +3,8 @@
 While a run is going, each finished chunk of steps is written at once to
 ``DIR/partial/chunk_XXXXX.npz``, so an interrupted run loses nothing already
 computed. At the end ``DIR/trajectory.npz`` holds the solution's records;
-when they keep every step the chunk files are deleted, else (``record_every >
-1``) they are kept in ``DIR/steps/`` as the full-resolution record
+when they keep every step the chunk files are deleted, else (``SaveAt(every=k
+> 1)``, the configuration's ``record_every``) they are kept in ``DIR/steps/`` as the full-resolution record
 (:func:`load_chunks` reads them back).
 """
 
@@ -26,18 +26,26 @@ RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bil
                  "iterations", "residual", "result")
 
 
-def chunk_writer(out_dir: Path):
-    """An ``on_chunk`` callback for :func:`~nsga_jax.simulate` that saves each chunk."""
-    partial = Path(out_dir) / "partial"
-    partial.mkdir(parents=True, exist_ok=True)
+def chunk_files(folder: str | Path):
+    """An ``on_chunk`` callback that saves chunk k's records as
+    ``folder/chunk_XXXXX.npz`` (what ``SaveAt(chunks=folder)`` makes
+    :func:`~nsga_jax.simulate` do)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
 
     def write(k: int, records: StepOutput) -> None:
         arrays = {f: np.asarray(getattr(records, f)) for f in RECORD_FIELDS}
-        tmp = partial / f"chunk_{k:05d}.tmp.npz"
+        tmp = folder / f"chunk_{k:05d}.tmp.npz"
         np.savez(tmp, **cast(dict[str, Any], arrays))  # numpy's stub would let **arrays fill allow_pickle
-        tmp.rename(partial / f"chunk_{k:05d}.npz")
+        tmp.rename(folder / f"chunk_{k:05d}.npz")
 
     return write
+
+
+def chunk_writer(out_dir: Path):
+    """An ``on_chunk`` callback for :func:`~nsga_jax.simulate` that saves each
+    chunk in ``out_dir/partial`` (the run folder's layout)."""
+    return chunk_files(Path(out_dir) / "partial")
 
 
 def summary(sol: Solution, scene: str, scheme: str, extra: dict[str, Any] | None = None) -> dict:
@@ -162,7 +170,8 @@ def plot_iterations(sol: Solution, path: Path, scene: str = "", *, scheme: str =
 
 def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]:
     """Concatenate the chunk files in ``DIR/partial`` (an interrupted run) or
-    ``DIR/steps`` (every step of a run with ``record_every > 1``)."""
+    ``DIR/steps`` (every step of a run with ``record_every > 1``); any folder
+    ``SaveAt(chunks=folder)`` wrote is ``load_chunks(folder, ".")``."""
     files = sorted((Path(out_dir) / folder).glob("chunk_?????.npz"))
     if not files:
         return {}
@@ -170,5 +179,5 @@ def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-__all__ = ["chunk_writer", "write_run", "summary", "load_chunks", "plot_observables", "plot_iterations",
-           "default_observables"]
+__all__ = ["chunk_files", "chunk_writer", "write_run", "summary", "load_chunks", "plot_observables",
+           "plot_iterations", "default_observables"]

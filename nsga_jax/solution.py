@@ -1,119 +1,195 @@
-"""The :class:`Solution` of a run: its trajectory, records and statistics (host side)."""
+"""The :class:`Solution` of a run: its trajectory, records, result and statistics.
+
+One type for every way of running: :func:`~nsga_jax.integrate` (pure, JAX
+leaves, usable under ``jit``, ``grad``, ``vmap`` and sharding) and the host
+drivers :func:`~nsga_jax.simulate` and :func:`~nsga_jax.simulate_batch`
+(NumPy leaves, with timings, warnings and named observables).
+"""
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .integrators.base import StepOutput
 from .monitors import RunTotals
 from .results import Result
 
-Observe = Callable[["Solution"], dict[str, np.ndarray]]
+Observables = Callable[["Solution"], dict[str, Any]]
+"""``Solution -> {name: array (rows,)}``: named quantities of a finished run
+(a scene's observables)."""
+
+SUBPROBLEM_NAMES = ("smooth", "position", "velocity")
 
 
+class Solution(eqx.Module):
+    """A trajectory and what the scheme did to get it.
 
-@dataclass
-class Solution:
-    """A trajectory and what the scheme did to get it (NumPy arrays, host side).
-
-    Every per-time array has a leading axis of length N + 1 (the initial state
-    first), or, with ``record_every = k > 1``, one entry per k steps plus the
-    initial and the last step. Record fields (``impulse``, ``nu``, ``lam``,
-    ``iterations``, ``result``...) are zero at index 0. ``stats`` and
-    ``failed_steps`` always cover every step.
+    Every per-time array has a leading axis of one row per kept step (the
+    initial state first): N + 1 rows, or with ``SaveAt(every=k)``, one per k
+    steps plus the initial and the last step. Record fields (``impulse``,
+    ``nu``, ``lam``, ``iterations``, ``result``...) are zero in the initial
+    row. ``stats``, ``failed_steps`` and ``result`` always cover every step.
 
     Attributes:
-        ts: times [s], (N+1,).
-        q, v: coordinates and velocities, (N+1, n).
-        records: :class:`~nsga_jax.integrators.ds.StepOutput` with NumPy leaves, (N+1, ...).
-        observables: named scene quantities, each (N+1,).
-        h: step size [s]; n_steps: steps actually taken (fewer than requested
-            when a failure stopped the run).
-        result: the first failure's :class:`Result` (``successful`` if none).
-        totals: statistics over every step (accumulated while running; computed
-            from ``records`` when not given).
-        stats: iteration statistics, failures, constraint violations, timings.
+        ts: times [s], (rows,).
+        q, v: coordinates and velocities, (rows, n); (0, n) when
+            ``SaveAt.fn`` chose what to keep.
+        records: the stacked :class:`~nsga_jax.StepOutput` of the kept rows,
+            or what ``SaveAt.fn`` returned for them.
+        result: the first failure's :class:`~nsga_jax.Result` code
+            (``successful`` if none); a :class:`Result` from the host
+            drivers, an int8 array from :func:`~nsga_jax.integrate`.
+        stats: statistics over every step (:func:`host_stats`,
+            :func:`traced_stats`): Newton iterations per sub-problem, failed
+            steps, constraint violations; from the host drivers also the
+            timings, the energy monitors and the warnings.
+        h: step size [s].
+        n_steps: steps taken (fewer than requested when a failure stopped a
+            host run); ``n_steps_requested``: steps asked for.
+        failed_steps: step numbers k (t = t0 + k h) of the failed steps, (F,)
+            (host drivers; ``None`` from :func:`~nsga_jax.integrate`, whose
+            ``records.result`` or ``stats["failed_steps"]`` tell instead).
+        observables: named quantities of the finished run (host drivers).
+        wall_time, compile_time: execution and compilation time [s] (host).
+        compile_source: ``"compiled"``, ``"cache"`` or ``"traced"`` (pure).
+        warnings: the monitors' warnings (host).
     """
 
-    ts: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    records: StepOutput
-    h: float
-    n_steps: int
-    n_steps_requested: int
-    result: Result
-    wall_time: float
-    compile_time: float
-    observables: dict[str, np.ndarray] = field(default_factory=dict)
-    totals: RunTotals | None = None
-    warnings: list[str] = field(default_factory=list)
-    compile_source: str = "compiled"
-
-    def __post_init__(self):
-        if self.totals is None:
-            self.totals = RunTotals()
-            self.totals.add(jax.tree_util.tree_map(lambda x: np.asarray(x)[1:], self.records), first_step=1)
+    ts: Any
+    q: Any
+    v: Any
+    records: Any
+    result: Any
+    stats: dict[str, Any]
+    h: Any
+    n_steps: int = eqx.field(static=True)
+    n_steps_requested: int = eqx.field(static=True)
+    failed_steps: Any = None
+    observables: dict[str, Any] = eqx.field(default_factory=dict)
+    wall_time: float = eqx.field(default=0.0, static=True)
+    compile_time: float = eqx.field(default=0.0, static=True)
+    compile_source: str = eqx.field(default="traced", static=True)
+    warnings: tuple[str, ...] = eqx.field(default=(), static=True)
 
     @property
-    def iterations(self) -> np.ndarray:
-        """Newton iterations (N+1, 3): smooth, position, velocity."""
-        return np.asarray(self.records.iterations)
+    def iterations(self) -> Any:
+        """Newton iterations (rows, 3): smooth, position, velocity."""
+        return self.records.iterations
 
     @property
-    def failed_steps(self) -> np.ndarray:
-        """Step numbers k (t = t0 + k h) of the steps whose result is not
-        successful; indices into ``ts`` when every step is recorded."""
-        assert self.totals is not None  # set by __post_init__
-        return np.asarray(self.totals.failed, dtype=int)
+    def impulse(self) -> Any:
+        """Constraint impulses Λ [N s], (rows, nc), bilaterals first."""
+        return self.records.impulse
 
     @property
-    def impulse(self) -> np.ndarray:
-        """Constraint impulses Λ [N s], (N+1, nc), bilaterals first."""
-        return np.asarray(self.records.impulse)
+    def gap(self) -> Any:
+        """Unilateral gaps g^U(q) [m], (rows, nu)."""
+        return self.records.gap
 
     @property
-    def gap(self) -> np.ndarray:
-        """Unilateral gaps g^U(q) [m], (N+1, nu)."""
-        return np.asarray(self.records.gap)
+    def failed(self) -> Any:
+        """Whether any step failed (Newton cap or non-finite value)."""
+        return self.stats["failed_steps"] > 0
 
-    @property
-    def stats(self) -> dict:
-        tot = self.totals
-        assert tot is not None  # set by __post_init__
-        n = max(tot.n_steps, 1)
-        stats: dict[str, Any] = {
-            "n_steps": int(self.n_steps),
-            "h": float(self.h),
-            "wall_time_s": float(self.wall_time),
-            "compile_time_s": float(self.compile_time),
-            "compile_source": self.compile_source,
-            "us_per_step": 1e6 * float(self.wall_time) / max(int(self.n_steps), 1),
-            "iterations": {
-                name: {"mean": float(tot.iterations_sum[i] / n), "max": int(tot.iterations_max[i])}
-                for i, name in enumerate(("smooth", "position", "velocity"))
-            },
-            "failed_steps": len(tot.failed),
-            "result": self.result.name,
-            "max_penetration": float(max(0.0, -tot.min_gap)),
-            "max_bilateral_violation_position": float(tot.max_bilateral),
-            "max_bilateral_violation_velocity": float(tot.max_bilateral_rate),
-        }
-        stats["iterations"]["linear_solves"] = {"mean": float(tot.solves_sum / n), "max": int(tot.solves_max)}
-        stats["energy"] = tot.energy_stats()
-        stats["warnings"] = list(self.warnings)
-        return stats
+
+# ------------------------------------------------------------ statistics
+
+
+def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: Result, wall_time: float = 0.0,
+               compile_time: float = 0.0, compile_source: str = "compiled",
+               warnings: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A host run's ``Solution.stats`` from its running totals (Python numbers)."""
+    n = max(totals.n_steps, 1)
+    stats: dict[str, Any] = {
+        "n_steps": int(n_steps),
+        "h": float(h),
+        "wall_time_s": float(wall_time),
+        "compile_time_s": float(compile_time),
+        "compile_source": compile_source,
+        "us_per_step": 1e6 * float(wall_time) / max(int(n_steps), 1),
+        "iterations": {
+            name: {"mean": float(totals.iterations_sum[i] / n), "max": int(totals.iterations_max[i])}
+            for i, name in enumerate(SUBPROBLEM_NAMES)
+        },
+        "failed_steps": len(totals.failed),
+        "result": result.name,
+        "max_penetration": float(max(0.0, -totals.min_gap)),
+        "max_bilateral_violation_position": float(totals.max_bilateral),
+        "max_bilateral_violation_velocity": float(totals.max_bilateral_rate),
+    }
+    stats["iterations"]["linear_solves"] = {"mean": float(totals.solves_sum / n), "max": int(totals.solves_max)}
+    stats["energy"] = totals.energy_stats()
+    stats["warnings"] = list(warnings)
+    return stats
+
+
+def traced_stats(iterations: jax.Array, result: jax.Array, gap: jax.Array, bilateral: jax.Array,
+                 bilateral_rate: jax.Array) -> dict[str, Any]:
+    """``Solution.stats`` of :func:`~nsga_jax.integrate`, in JAX, from every
+    step's iterations (N, 3), result codes (N,), gaps (N, nu) [m] and
+    bilateral violations (N, nb) [m] and [m/s]: the keys of :func:`host_stats`
+    that need no host (no timings, energies or warnings)."""
+    solves = jnp.sum(iterations, axis=1)
+    real = jnp.result_type(float)
+    stats: dict[str, Any] = {
+        "iterations": {
+            name: {"mean": jnp.mean(iterations[:, i], dtype=real), "max": jnp.max(iterations[:, i])}
+            for i, name in enumerate(SUBPROBLEM_NAMES)
+        },
+        "failed_steps": jnp.sum(result != Result.successful),
+        "max_penetration": jnp.maximum(0.0, -jnp.min(gap, initial=jnp.inf)),
+        "max_bilateral_violation_position": jnp.max(jnp.abs(bilateral), initial=0.0),
+        "max_bilateral_violation_velocity": jnp.max(jnp.abs(bilateral_rate), initial=0.0),
+    }
+    stats["iterations"]["linear_solves"] = {"mean": jnp.mean(solves, dtype=real), "max": jnp.max(solves)}
+    return stats
+
+
+def first_failure(result: jax.Array) -> jax.Array:
+    """The result code of the first failed step in ``result`` (N,), or
+    ``successful`` (JAX)."""
+    bad = result != Result.successful
+    return jnp.where(jnp.any(bad), result[jnp.argmax(bad)], jnp.asarray(Result.successful, result.dtype))
+
+
+# ------------------------------------------------------------ host solutions
+
+
+def host_solution(records, *, ts: np.ndarray, h: float, n_steps: int, n_steps_requested: int, result: Result,
+                  totals: RunTotals | None = None, wall_time: float = 0.0, compile_time: float = 0.0,
+                  compile_source: str = "compiled", warnings: tuple[str, ...] = ()) -> Solution:
+    """A host driver's :class:`Solution` from its NumPy records (initial row
+    first) and its running ``totals`` (without them, the records hold every
+    step and give the statistics)."""
+    if totals is None:
+        totals = RunTotals()
+        totals.add(jax.tree_util.tree_map(lambda x: np.asarray(x)[1:], records), first_step=1)
+    stats = host_stats(totals, n_steps=n_steps, h=h, result=result, wall_time=wall_time, compile_time=compile_time,
+                       compile_source=compile_source, warnings=tuple(warnings))
+    return Solution(ts=np.asarray(ts), q=np.asarray(records.q), v=np.asarray(records.v), records=records,
+                    result=result, stats=stats, h=h, n_steps=n_steps, n_steps_requested=n_steps_requested,
+                    failed_steps=np.asarray(totals.failed, dtype=int), wall_time=wall_time,
+                    compile_time=compile_time, compile_source=compile_source, warnings=tuple(warnings))
+
+
+def with_observables(sol: Solution, observables: Observables | None) -> Solution:
+    """``sol`` with the named quantities ``observables`` computes from it (in
+    float64, from the possibly float32 states)."""
+    if observables is None:
+        return sol
+    values = {k: np.asarray(v) for k, v in observables(_float64_view(sol)).items()}
+    return dataclasses.replace(sol, observables=values)
 
 
 def _float64_view(sol: Solution) -> Solution:
     """``sol`` with its floating-point arrays in float64 (itself if they are)."""
-    if sol.q.dtype == np.float64:
+    if np.asarray(sol.q).dtype == np.float64:
         return sol
 
     def up(x):
@@ -122,5 +198,3 @@ def _float64_view(sol: Solution) -> Solution:
 
     return dataclasses.replace(sol, ts=up(sol.ts), q=up(sol.q), v=up(sol.v),
                                records=jax.tree_util.tree_map(up, sol.records))
-
-

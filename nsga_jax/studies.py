@@ -23,6 +23,7 @@ from ._simulate import simulate
 from .batch import simulate_batch
 from .metrics import observed_order, relative_l1_error
 from .results import ConfigError
+from .saveat import SaveAt
 from .scenes.base import Scene, load_scene
 from .solution import Solution
 from .tables import write_csv
@@ -63,10 +64,10 @@ def run_step_sizes(scene: Scene, hs, mode: str = "grouped", group_ratio: float =
         if len(group) == 1:
             i = group[0]
             out[i] = simulate(scene.model, scheme, 0.0, T, hs[i], scene.q0, scene.v0, throw=False,
-                              observe=scene.observe, dtype=scene.solver["dtype"])
+                              observables=scene.observables, dtype=scene.solver["dtype"])
         else:
             sols = simulate_batch(scene.model, scheme, 0.0, T, [hs[i] for i in group], scene.q0, scene.v0,
-                                  observe=scene.observe, dtype=scene.solver["dtype"])
+                                  observables=scene.observables, dtype=scene.solver["dtype"])
             for i, sol in zip(group, sols):
                 out[i] = sol
     return out  # type: ignore[return-value]
@@ -109,7 +110,7 @@ def make_reference(scene_name: str, overrides: dict, ref: str | float) -> Refere
     h_ref = float(ref)
     scene = load_scene(scene_name, {**overrides, "h": h_ref})
     t = time.perf_counter()
-    sol = scene.run(throw=False, progress=False, record_every=1, dtype="float64")  # every step, in full precision
+    sol = scene.run(throw=False, progress=False, saveat=SaveAt(), dtype="float64")  # every step, in full precision
     wall = time.perf_counter() - t
     if sol.stats["failed_steps"]:
         raise ConfigError(f"the reference run ({scene.solver['scheme']}, h = {h_ref:g}) has failed steps; "

@@ -145,7 +145,7 @@ def _row(member: Member, sol: Solution) -> dict[str, Any]:
         "max_bilateral_rate_violation": st["max_bilateral_violation_velocity"],
     })
     view = _float64_view(sol)
-    obs = {k: np.asarray(v) for k, v in scene.observe(view).items()}
+    obs = {k: np.asarray(v) for k, v in scene.observables(view).items()}
     for name, y in obs.items():
         if y.ndim != 1:
             continue

@@ -214,14 +214,14 @@ def check(p):
 
 
 def make(p, concrete):
-    """``(model, q0, v0, observe)``, JAX-traceable in the float parameters ``p``;
+    """``(model, q0, v0, observables)``, JAX-traceable in the float parameters ``p``;
     the wall's side (structure) is read from the concrete values."""
     side = _side(concrete["wall_x"])
     model = DoublePendulum(m1=p["m1"], m2=p["m2"], l1=p["l1"], l2=p["l2"], gravity=p["gravity"],
                            wall_x=p["wall_x"], side=side, e=p["e"])
     q0, v0 = _positions(p), _velocities(p)
 
-    def observe(sol):
+    def observables(sol):
         """Named observables, each (N+1,), from sol.q, sol.v, sol.impulse [N s] and sol.h [s]."""
         x1, y1, x2, y2 = (sol.q[:, i] for i in range(4))
         vx2, vy2 = sol.v[:, 2], sol.v[:, 3]
@@ -236,7 +236,7 @@ def make(p, concrete):
             "energy": kinetic + p["gravity"] * (p["m1"] * y1 + p["m2"] * y2),  # [J]
         }
 
-    return model, q0, v0, observe
+    return model, q0, v0, observables
 
 
 SPEC = register(

@@ -33,7 +33,8 @@ class Scene:
         q0, v0: initial coordinates and velocities (n,).
         parameters: the validated scene parameters.
         solver: the validated solver settings (scheme, h, t_end, rho_inf, ...).
-        observe: ``Solution -> {name: array (N+1,)}``, the scene's observables.
+        observables: ``Solution -> {name: array (rows,)}``, the scene's named
+            observables (of a host or a pure :class:`~nsga_jax.Solution`).
         exact: ``ts -> {name: array}``, the exact solution of some observables
             where the scene has one (else ``None``).
     """
@@ -44,7 +45,7 @@ class Scene:
     v0: np.ndarray
     parameters: dict[str, Any]
     solver: dict[str, Any]
-    observe: Callable[[Solution], dict[str, np.ndarray]]
+    observables: Callable[[Solution], dict[str, np.ndarray]]
     exact: Callable[[np.ndarray], dict[str, np.ndarray]] | None = None
 
     @property
@@ -57,14 +58,16 @@ class Scene:
 
     def run(self, **kwargs) -> Solution:
         """Simulate from t = 0 to ``t_end`` with step ``h`` in the configured
-        ``dtype``, keeping every ``record_every``-th step; keyword arguments go
-        to :func:`~nsga_jax.simulate` (and take precedence)."""
+        ``dtype``, keeping every ``record_every``-th step
+        (``SaveAt(every=record_every)``); keyword arguments go to
+        :func:`~nsga_jax.simulate` (and take precedence)."""
         from .._simulate import simulate
+        from ..saveat import SaveAt
 
-        kwargs = {"dtype": self.solver["dtype"], "record_every": self.solver["record_every"], **kwargs}
+        kwargs = {"dtype": self.solver["dtype"], "saveat": SaveAt(every=self.solver["record_every"]), **kwargs}
         return simulate(
             self.model, self.scheme(), 0.0, self.solver["t_end"], self.solver["h"],
-            self.q0, self.v0, observe=self.observe, **kwargs,
+            self.q0, self.v0, observables=self.observables, **kwargs,
         )
 
 
@@ -83,7 +86,7 @@ def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
 
 
 Make = Callable[[dict[str, Any], dict[str, Any]], tuple["Model", Any, Any, Callable]]
-"""``make(p, concrete) -> (model, q0, v0, observe)``: JAX-traceable in the
+"""``make(p, concrete) -> (model, q0, v0, observables)``: JAX-traceable in the
 float parameters ``p`` (so gradients flow from them); structural decisions
 (sizes, indices, sides) read the validated Python values ``concrete``."""
 
@@ -117,10 +120,10 @@ class SceneSpec:
     def build(self, parameters: dict[str, Any], solver: dict[str, Any]) -> Scene:
         """A :class:`Scene` from validated parameters and solver settings
         (:func:`configure` has run the scene's check)."""
-        model, q0, v0, observe = self.make(parameters, parameters)
+        model, q0, v0, observables = self.make(parameters, parameters)
         exact = self.exact(parameters) if self.exact is not None else None
         return Scene(self.name, model, np.asarray(q0, float), np.asarray(v0, float), parameters, solver,
-                     observe, exact)
+                     observables, exact)
 
     def solver_specs(self) -> dict[str, Param]:
         specs = dict(SOLVER_PARAMS)
@@ -330,14 +333,14 @@ def parametrize(name_or_path: str | Path, overrides: dict[str, Any] | None = Non
 
     Returns ``(params, build)``: ``params`` maps each chosen float parameter
     (default: all of them) to a float array, and ``build(params) -> (model, q0,
-    v0, observe)`` is JAX-traceable in them, so one writes::
+    v0, observables)`` is JAX-traceable in them, so one writes::
 
         params, build = parametrize("impacting_bar", names=["E", "e"])
 
         def loss(p):
-            model, q0, v0, observe = build(p)
-            traj = nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, 1e-3, 1500, q0, v0)
-            return jnp.mean(observe(traj)["tip_u"] ** 2)
+            model, q0, v0, observables = build(p)
+            sol = nsga_jax.integrate(model, nsga_jax.DS(), 0.0, 1.5, 1e-3, q0, v0)
+            return jnp.mean(observables(sol)["tip_u"] ** 2)
 
         jax.grad(loss)(params)
 

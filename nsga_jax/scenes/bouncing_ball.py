@@ -25,12 +25,12 @@ def make(p, concrete):
     q0 = jnp.reshape(jnp.asarray(p["height"], float), (1,))
     v0 = jnp.reshape(jnp.asarray(p["velocity"], float), (1,))
 
-    def observe(sol):
+    def observables(sol):
         z, vz = sol.q[:, 0], sol.v[:, 0]
         energy = 0.5 * p["mass"] * vz**2 + p["mass"] * p["gravity"] * z
         return {"z": z, "vz": vz, "force": sol.impulse[:, 0] / sol.h, "energy": energy}
 
-    return model, q0, v0, observe
+    return model, q0, v0, observables
 
 
 def exact(p):

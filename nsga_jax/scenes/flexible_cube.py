@@ -49,7 +49,7 @@ def make(p, concrete):
     v0 = jnp.zeros_like(q0).at[2::3].set(p["velocity"])
     energy = jax.jit(jax.vmap(model.energy))
 
-    def observe(sol):
+    def observables(sol):
         return {
             "x1_uz": sol.q[:, 3 * corner + 2] - q0[3 * corner + 2],
             "x1_vz": sol.v[:, 3 * corner + 2],
@@ -61,7 +61,7 @@ def make(p, concrete):
             "gaps": sol.gap,
         }
 
-    return model, q0, v0, observe
+    return model, q0, v0, observables
 
 
 SPEC = register(

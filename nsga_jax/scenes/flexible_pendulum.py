@@ -56,7 +56,7 @@ def make(p, concrete):
     v0 = jnp.zeros_like(q0)
     energy = jax.vmap(model.energy)
 
-    def observe(sol):
+    def observables(sol):
         q, v = sol.q, sol.v
         return {
             "tip_x": q[:, -3], "tip_y": q[:, -2], "tip_theta": q[:, -1],
@@ -67,7 +67,7 @@ def make(p, concrete):
             "energy": energy(q, v),
         }
 
-    return model, q0, v0, observe
+    return model, q0, v0, observables
 
 
 SPEC = register(

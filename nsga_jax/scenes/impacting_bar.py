@@ -43,7 +43,7 @@ def make(p, concrete):
     q0 = jnp.zeros(ne + 1)
     v0 = jnp.full(ne + 1, p["velocity"], dtype=float)
 
-    def observe(sol):
+    def observables(sol):
         zeros = jnp.zeros(ne + 1)
         M = model.mass(zeros)
         K = model.tangents(zeros, zeros, 0.0)[0]
@@ -58,7 +58,7 @@ def make(p, concrete):
             "energy": energy,
         }
 
-    return model, q0, v0, observe
+    return model, q0, v0, observables
 
 
 SPEC = register(

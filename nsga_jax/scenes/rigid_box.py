@@ -80,7 +80,7 @@ def make(p, concrete):
     omega0 = R0 @ jnp.stack([jnp.asarray(p[k], float) for k in ("omega_x", "omega_y", "omega_z")])
     v0 = natural_velocities(R0, omega0, jnp.stack([jnp.asarray(p[k], float) for k in ("vx0", "vy0", "vz0")]))
 
-    def observe(sol):
+    def observables(sol):
         q, v = sol.q, sol.v
         M = model.mass(q0)
         R = jnp.stack([q[:, 3:6], q[:, 6:9], q[:, 9:12]], axis=2)
@@ -95,7 +95,7 @@ def make(p, concrete):
         out["rotation"] = R
         return out
 
-    return model, q0, v0, observe
+    return model, q0, v0, observables
 
 
 SPEC = register(

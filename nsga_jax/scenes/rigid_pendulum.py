@@ -44,7 +44,7 @@ def make(p, concrete):
     side = _side(concrete)
     model = RigidPendulum(m=p["mass"], length=length, gravity=p["gravity"], wall_x=p["wall_x"], side=side, e=p["e"])
 
-    def observe(sol):
+    def observables(sol):
         x, y, vx, vy = sol.q[:, 0], sol.q[:, 1], sol.v[:, 0], sol.v[:, 1]
         energy = 0.5 * p["mass"] * (vx**2 + vy**2) + p["mass"] * p["gravity"] * y
         return {
@@ -55,7 +55,7 @@ def make(p, concrete):
             "energy": energy,
         }
 
-    return model, q0, v0, observe
+    return model, q0, v0, observables
 
 
 SPEC = register(
