@@ -237,7 +237,7 @@ def simulate(
     warnings += invariant_warnings(totals, tolerances, h, t0)
     for message in warnings:
         _warnings.warn(message, InvariantWarning, stacklevel=2)
-    sol = with_observables(host_solution(**run, totals=totals, warnings=tuple(warnings)), observables)
+    sol = with_observables(host_solution(**run, totals=totals, warnings=warnings), observables)
     if error is not None:
         error.solution = sol
         raise error

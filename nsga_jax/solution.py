@@ -75,7 +75,7 @@ class Solution(eqx.Module):
     wall_time: float = eqx.field(default=0.0, static=True)
     compile_time: float = eqx.field(default=0.0, static=True)
     compile_source: str = eqx.field(default="traced", static=True)
-    warnings: tuple[str, ...] = eqx.field(default=(), static=True)
+    warnings: list[str] = eqx.field(default_factory=list)
 
     @property
     def iterations(self) -> Any:
@@ -103,7 +103,7 @@ class Solution(eqx.Module):
 
 def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: Result, wall_time: float = 0.0,
                compile_time: float = 0.0, compile_source: str = "compiled",
-               warnings: tuple[str, ...] = ()) -> dict[str, Any]:
+               warnings: list[str] | None = None) -> dict[str, Any]:
     """A host run's ``Solution.stats`` from its running totals (Python numbers)."""
     n = max(totals.n_steps, 1)
     stats: dict[str, Any] = {
@@ -125,7 +125,7 @@ def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: Result, wal
     }
     stats["iterations"]["linear_solves"] = {"mean": float(totals.solves_sum / n), "max": int(totals.solves_max)}
     stats["energy"] = totals.energy_stats()
-    stats["warnings"] = list(warnings)
+    stats["warnings"] = list(warnings or [])
     return stats
 
 
@@ -163,7 +163,7 @@ def first_failure(result: jax.Array) -> jax.Array:
 
 def host_solution(records, *, ts: np.ndarray, h: float, n_steps: int, n_steps_requested: int, result: Result,
                   totals: RunTotals | None = None, wall_time: float = 0.0, compile_time: float = 0.0,
-                  compile_source: str = "compiled", warnings: tuple[str, ...] = ()) -> Solution:
+                  compile_source: str = "compiled", warnings: list[str] | None = None) -> Solution:
     """A host driver's :class:`Solution` from its NumPy records (initial row
     first) and its running ``totals`` (without them, the records hold every
     step and give the statistics)."""
@@ -171,11 +171,11 @@ def host_solution(records, *, ts: np.ndarray, h: float, n_steps: int, n_steps_re
         totals = RunTotals()
         totals.add(jax.tree_util.tree_map(lambda x: np.asarray(x)[1:], records), first_step=1)
     stats = host_stats(totals, n_steps=n_steps, h=h, result=result, wall_time=wall_time, compile_time=compile_time,
-                       compile_source=compile_source, warnings=tuple(warnings))
+                       compile_source=compile_source, warnings=warnings or [])
     return Solution(ts=np.asarray(ts), q=np.asarray(records.q), v=np.asarray(records.v), records=records,
                     result=result, stats=stats, h=h, n_steps=n_steps, n_steps_requested=n_steps_requested,
                     failed_steps=np.asarray(totals.failed, dtype=int), wall_time=wall_time,
-                    compile_time=compile_time, compile_source=compile_source, warnings=tuple(warnings))
+                    compile_time=compile_time, compile_source=compile_source, warnings=list(warnings or []))
 
 
 def with_observables(sol: Solution, observables: Observables | None) -> Solution:

@@ -59,7 +59,8 @@ def test_a_run_of_more_steps_than_memory_holds_is_refused_with_the_estimate():
 def test_float32_time_is_t0_plus_k_h_not_accumulated():
     """10**6 steps in float32: the run ends at t = 100 s (it ended at 99.327 s
     when time was accumulated step by step)."""
-    sol = nj.simulate(BALL, nj.DS(), 0.0, 100.0, 1e-4, [1.0], [0.0], dtype="float32", record_every=100_000)
+    sol = nj.simulate(BALL, nj.DS(), 0.0, 100.0, 1e-4, [1.0], [0.0], dtype="float32",
+                      saveat=nj.SaveAt(every=100_000))
     assert sol.n_steps == 1_000_000
     assert sol.ts[-1] == 100.0 and sol.ts.dtype == np.float64
     assert abs(float(sol.records.t[-1]) - 100.0) < 1e-4  # the device's own float32 time of the last step
@@ -98,6 +99,8 @@ def test_models_refuse_what_their_physics_cannot_mean():
 def test_simulate_refuses_by_name(kwargs, error, match):
     args = {"model": BALL, "scheme": nj.DS(), "t0": 0.0, "t1": 1.0, "h": 1e-3, "q0": [1.0], "v0": [0.0], **kwargs}
     with pytest.raises(error, match=match):
+        if "record_every" in args:  # kept rows: SaveAt(every=k)
+            args["saveat"] = nj.SaveAt(every=args.pop("record_every"))
         nj.simulate(**args)
 
 

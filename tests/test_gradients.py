@@ -21,9 +21,9 @@ def scene_loss(name, names, overrides, n_steps, observable, scheme=None):
     h = scene.solver["h"]
 
     def loss(p):
-        model, q0, v0, observe = build(p)
-        traj = nsga_jax.trajectory(model, scheme, 0.0, h, n_steps, q0, v0)
-        return jnp.mean(observe(traj)[observable] ** 2)
+        model, q0, v0, observables = build(p)
+        sol = nsga_jax.integrate(model, scheme, 0.0, n_steps * h, h, q0, v0, n_steps=n_steps)
+        return jnp.mean(observables(sol)[observable] ** 2)
 
     return params, loss
 
@@ -118,17 +118,17 @@ def test_vmap_of_grad_equals_grad():
 def test_coupled_scheme_refuses_differentiation():
     model, q0, v0, _ = parametrize("bouncing_ball")[1](parametrize("bouncing_ball")[0])
     with pytest.raises(nsga_jax.ConfigError, match="CS is not differentiable"):
-        nsga_jax.trajectory(model, nsga_jax.CS(), 0.0, 1e-3, 10, q0, v0)
+        nsga_jax.integrate(model, nsga_jax.CS(), 0.0, 0.01, 1e-3, q0, v0)
 
 
 def test_checkpointing_choices_give_the_same_gradient():
     params, build = parametrize("bouncing_ball", {"h": 1e-3}, ["e", "height"])
 
     def loss(p, every, steps):
-        model, q0, v0, observe = build(p)
-        traj = nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, 1e-3, 900, q0, v0, checkpoint_every=every,
-                                   checkpoint_steps=steps)
-        return jnp.mean(observe(traj)["z"] ** 2)
+        model, q0, v0, observables = build(p)
+        sol = nsga_jax.integrate(model, nsga_jax.DS(), 0.0, 0.9, 1e-3, q0, v0, checkpoint_every=every,
+                                 checkpoint_steps=steps)
+        return jnp.mean(observables(sol)["z"] ** 2)
 
     grads = [jax.jit(jax.grad(lambda p, e=e, s=s: loss(p, e, s)))(params)
              for e, s in ((None, False), (7, True))]
@@ -140,10 +140,10 @@ def test_checkpointing_choices_give_the_same_gradient():
 def test_spectral_radius_is_differentiable():
     # rho_inf is a field of the scheme: build the scheme inside the loss
     params, build = parametrize("impacting_bar", {"h": 2e-3, "n_elements": 20}, ["e"])
-    model, q0, v0, observe = build(params)
+    model, q0, v0, observables = build(params)
 
     def loss(p):
-        traj = nsga_jax.trajectory(model, nsga_jax.DS(rho_inf=p["rho_inf"]), 0.0, 2e-3, 750, q0, v0)
-        return jnp.mean(observe(traj)["tip_v"] ** 2)
+        sol = nsga_jax.integrate(model, nsga_jax.DS(rho_inf=p["rho_inf"]), 0.0, 1.5, 2e-3, q0, v0)
+        return jnp.mean(observables(sol)["tip_v"] ** 2)
 
     check_against_fd({"rho_inf": jnp.asarray(0.8)}, loss, rtol=1e-5)

@@ -130,9 +130,9 @@ def test_gradients_with_reused_factorisations():
         scheme = dataclasses.replace(make_scheme(scene.solver), reuse_min_dof=min_dof, tol_r=1e-10, tol_f=1e-10)
 
         def loss(p, scheme=scheme):
-            model, q0, v0, observe = build(p)
-            traj = nsga_jax.trajectory(model, scheme, 0.0, 1e-3, 1500, q0, v0)
-            return jnp.mean(observe(traj)["x"] ** 2)
+            model, q0, v0, observables = build(p)
+            sol = nsga_jax.integrate(model, scheme, 0.0, 1.5, 1e-3, q0, v0)
+            return jnp.mean(observables(sol)["x"] ** 2)
 
         grads.append(float(jax.jit(jax.grad(loss))(params)["length"]))
     assert abs(grads[1]) > 1e-8

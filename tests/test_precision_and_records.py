@@ -16,7 +16,7 @@ from nsga_jax.scenes import load_scene
 def test_strided_records_keep_every_kth_step_and_full_statistics():
     scene = load_scene("bouncing_ball", {"t_end": 3.0})
     full = scene.run()
-    strided = scene.run(record_every=7, chunk_size=100)
+    strided = scene.run(saveat=nj.SaveAt(every=7), chunk_size=100)
     assert strided.n_steps == full.n_steps == 3000
     kept = np.r_[np.arange(0, 3001, 7), 3000]  # every 7th step, the initial state and the last step
     np.testing.assert_array_equal(strided.ts, full.ts[kept])
@@ -29,12 +29,12 @@ def test_strided_records_keep_every_kth_step_and_full_statistics():
 def test_strided_records_keep_every_failure():
     scene = load_scene("rigid_pendulum", {"max_iter": 1, "t_end": 2.0})
     full = scene.run(throw=False)
-    strided = scene.run(throw=False, record_every=10)
+    strided = scene.run(throw=False, saveat=nj.SaveAt(every=10))
     assert len(full.failed_steps) >= 2
     np.testing.assert_array_equal(strided.failed_steps, full.failed_steps)
     assert strided.stats["iterations"] == full.stats["iterations"]
     with pytest.raises(nj.ConvergenceError) as info:
-        scene.run(record_every=10)
+        scene.run(saveat=nj.SaveAt(every=10))
     sol = info.value.solution
     assert sol.n_steps == info.value.step and sol.ts[-1] == pytest.approx(info.value.time)
 

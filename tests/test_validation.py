@@ -199,11 +199,18 @@ def test_rigid_body_inertia_must_be_positive_definite():
     ],
 )
 def test_simulate_options_are_checked(kwargs, match):
-    refused(match, nj.simulate, BALL, nj.DS(), 0.0, 1.0, 1e-3, [1.0], [0.0], **kwargs)
+    def run():
+        options = dict(kwargs)
+        if "record_every" in options:  # kept rows: SaveAt(every=k)
+            options["saveat"] = nj.SaveAt(every=options.pop("record_every"))
+        return nj.simulate(BALL, nj.DS(), 0.0, 1.0, 1e-3, [1.0], [0.0], **options)
+
+    refused(match, run)
 
 
-def test_trajectory_arguments_are_checked():
-    refused(r"n_steps must be an integer >= 1", nj.trajectory, BALL, nj.DS(), 0.0, 1e-3, 0, np.ones(1), np.zeros(1))
-    refused(r"q0 must have shape \(1,\)", nj.trajectory, BALL, nj.DS(), 0.0, 1e-3, 10, np.ones(2), np.zeros(1))
-    refused(r"BouncingBall.e must be in", lambda: nj.trajectory(nj.BouncingBall(m=1.0, gravity=9.81, e=2.0), nj.DS(),
-                                                                  0.0, 1e-3, 10, np.ones(1), np.zeros(1)))
+def test_integrate_arguments_are_checked():
+    refused(r"n_steps must be an integer >= 1", nj.integrate, BALL, nj.DS(), 0.0, 1.0, 1e-3, np.ones(1), np.zeros(1),
+            n_steps=0)
+    refused(r"q0 must have shape \(1,\)", nj.integrate, BALL, nj.DS(), 0.0, 0.01, 1e-3, np.ones(2), np.zeros(1))
+    refused(r"BouncingBall.e must be in", lambda: nj.integrate(nj.BouncingBall(m=1.0, gravity=9.81, e=2.0), nj.DS(),
+                                                                 0.0, 0.01, 1e-3, np.ones(1), np.zeros(1)))
