@@ -25,9 +25,9 @@ def main() -> None:
     params, build = parametrize("impacting_bar", {"h": H}, ["E", "e"])
 
     def loss(p, adjoint):
-        model, q0, v0, observe = build(p)
-        traj = nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, H, N, q0, v0, adjoint=adjoint)
-        return jnp.mean(observe(traj)["tip_u"] ** 2)
+        model, q0, v0, observables = build(p)
+        sol = nsga_jax.integrate(model, nsga_jax.DS(), 0.0, N * H, H, q0, v0, n_steps=N, adjoint=adjoint)
+        return jnp.mean(observables(sol)["tip_u"] ** 2)
 
     for adjoint in ("discrete", "event"):
         f = jax.jit(jax.value_and_grad(loss), static_argnums=1)

@@ -41,9 +41,9 @@ def measure(n_steps: int, mode: str, repeat: int) -> dict:
 
     def loss(p):
         model, q0, v0, _ = build(p)
-        traj = nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, 1e-3, n_steps, q0, v0,
-                                   observe=lambda state, out: state.q[-1])
-        return jnp.mean(traj.records**2)
+        sol = nsga_jax.integrate(model, nsga_jax.DS(), 0.0, n_steps * 1e-3, 1e-3, q0, v0, n_steps=n_steps,
+                                 saveat=nsga_jax.SaveAt(fn=lambda state, out: state.q[-1]))
+        return jnp.mean(sol.records**2)
 
     f = loss if mode == "forward" else jax.grad(loss)
     t = time.perf_counter()

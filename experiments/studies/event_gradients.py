@@ -75,8 +75,9 @@ class Case:
         t_data, y_data = jnp.asarray(self.data_t), jnp.asarray(self.data_y)
 
         def loss(p):
-            model, q0, v0, observe = build(p)
-            y = observe(nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, h, n, q0, v0, adjoint=adjoint))
+            model, q0, v0, observables = build(p)
+            y = observables(nsga_jax.integrate(model, nsga_jax.DS(), 0.0, n * h, h, q0, v0, n_steps=n,
+                                               adjoint=adjoint))
             return jnp.mean((jnp.interp(t_data, ts, y[self.observable]) - y_data) ** 2)
 
         return params, loss
@@ -111,7 +112,7 @@ def bar_case() -> Case:
     h_ref = 1e-5
 
     def tip(p):
-        sol = load_scene("impacting_bar", {**p, "h": h_ref, "t_end": 1.5}).run(record_every=100)
+        sol = load_scene("impacting_bar", {**p, "h": h_ref, "t_end": 1.5}).run(saveat=nsga_jax.SaveAt(every=100))
         return np.interp(t, sol.ts, sol.observables["tip_u"])
 
     data = tip({"E": 900.0})

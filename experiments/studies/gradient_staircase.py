@@ -54,8 +54,8 @@ def discrete_loss(h: float):
     ts = jnp.arange(n + 1) * h
 
     def loss(e):
-        model, q0, v0, observe = build({"e": e})
-        z = observe(nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, h, n, q0, v0))["z"]
+        model, q0, v0, observables = build({"e": e})
+        z = observables(nsga_jax.integrate(model, nsga_jax.DS(), 0.0, n * h, h, q0, v0, n_steps=n))["z"]
         return jnp.mean((jnp.interp(T_DATA, ts, z) - Z_DATA) ** 2)
 
     return jax.jit(jax.vmap(jax.value_and_grad(loss)))

@@ -87,7 +87,7 @@ def bar_checks() -> dict:
     import jax
     import jax.numpy as jnp
 
-    from nsga_jax import trajectory
+    from nsga_jax import integrate
     from nsga_jax.scenes import load_scene, parametrize
     from nsga_jax.scenes.base import make_scheme
 
@@ -97,9 +97,9 @@ def bar_checks() -> dict:
 
     @jax.jit
     def signals(p):
-        model, q0, v0, observe = build(p)
-        obs = observe(trajectory(model, scheme, 0.0, overrides["h"], round(overrides["t_end"] / overrides["h"]),
-                                 q0, v0))
+        model, q0, v0, observables = build(p)
+        n = round(overrides["t_end"] / overrides["h"])
+        obs = observables(integrate(model, scheme, 0.0, n * overrides["h"], overrides["h"], q0, v0, n_steps=n))
         return obs["tip_u"], obs["tip_v"]
 
     u_true, v_true = signals(true)
