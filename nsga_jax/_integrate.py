@@ -186,8 +186,8 @@ def integrate(
     for name, x in (("q0", q0), ("v0", v0)):
         if isinstance(x, (str, bytes)) or x is None:
             raise TypeError(f"{name} must be an array of {model.n_dof} numbers, got {describe(x)}")
-        if jnp.shape(x) != (model.n_dof,):
-            raise ConfigError(f"{name} must have shape ({model.n_dof},), got {jnp.shape(x)}")
+        if np.shape(x) != (model.n_dof,):  # numpy's shape: lists too, and tracers by their .shape
+            raise ConfigError(f"{name} must have shape ({model.n_dof},), got {np.shape(x)}")
     scheme = dataclasses.replace(scheme, differentiable=True)
     scheme.bounds()  # schemes without an implicit adjoint refuse here
     dtype = jnp.result_type(float)

@@ -58,6 +58,7 @@ LONG = {
     "test_gradients.py::test_checkpointing_choices_give_the_same_gradient",
     "test_gradients.py::test_spectral_radius_is_differentiable",
     "test_identify.py::test_cli_identify_synthetic_then_from_file",
+    "test_integrate.py::test_integrate_under_jit_equals_simulate[impacting_bar-overrides1]",
     "test_identify.py::test_adam_also_descends",
     "test_identify.py::test_a_start_30_percent_above_recovers_the_restitution",
     "test_newton.py::test_gradients_with_reused_factorisations",

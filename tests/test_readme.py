@@ -81,6 +81,13 @@ def _python_api_simulate(ns):
     assert ns["model"].e == 0.8
 
 
+def _python_api_saveat(ns):
+    assert ns["every"].ts.shape == (11,)
+    np.testing.assert_allclose(np.asarray(ns["every"].ts), np.linspace(0.0, 1.0, 11), atol=1e-12)
+    grad = float(ns["jax"].grad(ns["final_height"])(0.8))
+    assert math.isfinite(grad) and grad != 0.0
+
+
 def _python_api_batches(ns):
     assert [s.n_steps for s in ns["sols"]] == [1500, 750, 375]
     assert all(s.stats["failed_steps"] == 0 for s in ns["sols"])
@@ -119,7 +126,8 @@ def _own_model_from_python(ns):
 CHECKS = {
     ("docs/own-model.md", "## 4. From Python"): _own_model_from_python,
     ("README.md", "## A first example"): _readme_first_example,
-    ("docs/python-api.md", "## Running a model: `simulate`"): _python_api_simulate,
+    ("docs/python-api.md", "## Running a model: `integrate` and `simulate`"): _python_api_simulate,
+    ("docs/python-api.md", "## Output control: `SaveAt`"): _python_api_saveat,
     ("docs/python-api.md", "## Batches"): _python_api_batches,
     ("docs/python-api.md", "## Writing a model"): _python_api_model,
     ("docs/gradients.md", "## Gradients through whole trajectories"): _gradients,

@@ -1,0 +1,141 @@
+"""The pure entry point ``integrate`` and the host driver ``simulate`` give one
+``Solution``: the same arrays to round-off, under jit, grad and vmap; output
+control by ``SaveAt``; named errors for what each cannot honour."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import nsga_jax as nj
+from nsga_jax.output import load_chunks
+from nsga_jax.scenes import load_scene, parametrize
+
+BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+STAT_KEYS = ("failed_steps", "max_penetration", "max_bilateral_violation_position",
+             "max_bilateral_violation_velocity")
+
+
+def assert_same_run(pure, host, atol=1e-10):
+    assert isinstance(pure, nj.Solution) and isinstance(host, nj.Solution)
+    for name in ("ts", "q", "v", "impulse", "gap", "iterations"):
+        np.testing.assert_allclose(np.asarray(getattr(pure, name)), getattr(host, name), rtol=0, atol=atol,
+                                   err_msg=name)
+    assert int(pure.result) == int(host.result)
+    for key in STAT_KEYS:
+        assert float(pure.stats[key]) == pytest.approx(host.stats[key], abs=atol), key
+    for name, it in host.stats["iterations"].items():
+        assert float(pure.stats["iterations"][name]["mean"]) == pytest.approx(it["mean"], rel=1e-12), name
+        assert int(pure.stats["iterations"][name]["max"]) == it["max"], name
+
+
+@pytest.mark.parametrize("name, overrides", [("bouncing_ball", {"t_end": 0.6}),
+                                             ("impacting_bar", {"n_elements": 20, "t_end": 0.6, "h": 2e-3})])
+def test_integrate_under_jit_equals_simulate(name, overrides):
+    scene = load_scene(name, overrides)
+    host = scene.run()
+    t1, h = scene.solver["t_end"], scene.solver["h"]
+    pure = jax.jit(lambda q0, v0: nj.integrate(scene.model, scene.scheme(), 0.0, t1, h, q0, v0))(scene.q0, scene.v0)
+    assert pure.n_steps == host.n_steps and not bool(pure.failed) and not host.failed
+    assert_same_run(pure, host)
+
+
+def test_integrate_with_traced_h_and_n_steps_equals_simulate():
+    host = nj.simulate(BALL, nj.DS(), 0.0, 0.5, 1e-3, [0.2], [0.0])  # an impact at t = 0.2 s
+    pure = jax.jit(lambda h: nj.integrate(BALL, nj.DS(), 0.0, 500 * h, h, 0.2 * jnp.ones(1), jnp.zeros(1),
+                                          n_steps=500))(1e-3)
+    assert_same_run(pure, host)
+
+
+def test_integrate_under_vmap_equals_simulate_per_member():
+    heights = jnp.asarray([0.2, 0.1])
+    batch = jax.jit(jax.vmap(lambda z: nj.integrate(BALL, nj.DS(), 0.0, 0.5, 1e-3, z[None], jnp.zeros(1))))(heights)
+    assert batch.q.shape == (2, 501, 1)
+    for i, z in enumerate(heights):
+        host = nj.simulate(BALL, nj.DS(), 0.0, 0.5, 1e-3, [float(z)], [0.0])
+        member = jax.tree_util.tree_map(lambda x, i=i: x[i], batch)
+        assert_same_run(member, host)
+
+
+def test_saveat_every_equals_slicing_the_full_run():
+    run = jax.jit(lambda saveat: nj.integrate(BALL, nj.DS(), 0.0, 0.5, 1e-3, 0.2 * jnp.ones(1), jnp.zeros(1),
+                                              saveat=saveat), static_argnums=0)
+    full, strided = run(nj.SaveAt()), run(nj.SaveAt(every=7))
+    kept = np.r_[np.arange(0, 501, 7), 500]  # every 7th step, the initial state and the last step
+    np.testing.assert_array_equal(strided.ts, full.ts[kept])
+    for a, b in zip(jax.tree_util.tree_leaves(strided.records), jax.tree_util.tree_leaves(full.records)):
+        np.testing.assert_array_equal(a, b[kept])
+    for key in STAT_KEYS:
+        assert float(strided.stats[key]) == float(full.stats[key])
+    host = nj.simulate(BALL, nj.DS(), 0.0, 0.5, 1e-3, [0.2], [0.0], saveat=nj.SaveAt(every=7))
+    np.testing.assert_allclose(strided.ts, host.ts, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(strided.q, host.q, rtol=0, atol=1e-12)
+
+
+def test_saveat_fn_keeps_what_a_loss_needs_under_grad():
+    """``jax.grad`` through ``integrate`` (a Solution as auxiliary output):
+    keeping one number per step gives the full record's loss and gradient."""
+    params, build = parametrize("bouncing_ball", {"h": 1e-3, "height": 0.2, "t_end": 0.5}, ["e", "height"])
+
+    def loss(p, saveat):
+        model, q0, v0, _ = build(p)
+        sol = nj.integrate(model, nj.DS(), 0.0, 0.5, 1e-3, q0, v0, saveat=saveat)
+        z = sol.q[:, 0] if saveat.fn is None else sol.records
+        return jnp.mean(z**2), sol
+
+    grad = jax.jit(jax.value_and_grad(loss, has_aux=True), static_argnums=1)
+    (full, sol_full), g_full = grad(params, nj.SaveAt())
+    (saved, sol_saved), g_saved = grad(params, nj.SaveAt(fn=lambda state, record: state.q[0]))
+    assert isinstance(sol_full, nj.Solution) and sol_full.q.shape == (501, 1)
+    assert sol_saved.q.shape == (0, 1) and sol_saved.records.shape == (501,)
+    assert float(sol_full.stats["iterations"]["velocity"]["max"]) >= 1  # the impact is in the run
+    assert float(saved) == pytest.approx(float(full), rel=1e-14)
+    for k in params:
+        assert float(g_full[k]) != 0.0
+        np.testing.assert_allclose(float(g_saved[k]), float(g_full[k]), rtol=1e-12, err_msg=k)
+
+
+def test_traced_times_need_n_steps():
+    with pytest.raises(nj.ConfigError, match=r"n_steps must be given when t1 is traced"):
+        jax.jit(lambda t1: nj.integrate(BALL, nj.DS(), 0.0, t1, 1e-3, jnp.ones(1), jnp.zeros(1)))(1.0)
+    with pytest.raises(nj.ConfigError, match=r"n_steps must be given when t1, h are traced"):
+        jax.grad(lambda h: nj.integrate(BALL, nj.DS(), 0.0, 10 * h, h, jnp.ones(1), jnp.zeros(1)).q.sum())(1e-3)
+    with pytest.raises(nj.ConfigError, match=r"n_steps = 50 disagrees with floor\(\(t1 - t0\)/h\) = 100"):
+        nj.integrate(BALL, nj.DS(), 0.0, 0.1, 1e-3, jnp.ones(1), jnp.zeros(1), n_steps=50)
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"every": 0}, nj.ConfigError, r"record_every must be an integer >= 1, got int 0 \(SaveAt.every"),
+    ({"every": True}, nj.ConfigError, r"record_every must be an integer >= 1, got bool True \(SaveAt.every"),
+    ({"every": 2.5}, nj.ConfigError, r"record_every must be an integer >= 1, got float 2.5"),
+    ({"fn": 3}, TypeError, r"SaveAt.fn must be a function \(state, record\) -> pytree or None, got int 3"),
+    ({"chunks": 3}, TypeError, r"SaveAt.chunks must be a folder \(str or pathlib.Path\) or None, got int 3"),
+])
+def test_saveat_fields_are_checked(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        nj.SaveAt(**kwargs)
+
+
+def test_each_entry_point_refuses_what_only_the_other_honours(tmp_path):
+    with pytest.raises(nj.ConfigError, match=r"integrate \(pure\) cannot honour SaveAt.chunks .*nsga_jax.simulate"):
+        nj.integrate(BALL, nj.DS(), 0.0, 0.1, 1e-3, jnp.ones(1), jnp.zeros(1), saveat=nj.SaveAt(chunks=tmp_path))
+    with pytest.raises(nj.ConfigError, match=r"simulate \(host driver\) cannot honour SaveAt.fn .*nsga_jax.integrate"):
+        nj.simulate(BALL, nj.DS(), 0.0, 0.1, 1e-3, [1.0], [0.0], saveat=nj.SaveAt(fn=lambda s, r: s.q))
+    with pytest.raises(TypeError, match=r"saveat must be a nsga_jax.SaveAt, got int 7"):
+        nj.integrate(BALL, nj.DS(), 0.0, 0.1, 1e-3, jnp.ones(1), jnp.zeros(1), saveat=7)
+
+
+def test_saveat_chunks_writes_every_step_to_disk(tmp_path):
+    sol = nj.simulate(BALL, nj.DS(), 0.0, 0.5, 1e-3, [1.0], [0.0], chunk_size=64,
+                      saveat=nj.SaveAt(every=10, chunks=tmp_path / "steps"))
+    steps = load_chunks(tmp_path / "steps", ".")
+    assert steps["t"].shape == (500,) and sol.ts.shape == (51,)
+    np.testing.assert_array_equal(steps["q"][9::10], sol.q[1:])
+
+
+def test_simulate_batch_returns_one_solution_per_step_size():
+    sols = nj.simulate_batch(BALL, nj.DS(), 0.0, 1.0, [1e-3, 2e-3], [1.0], [0.0])
+    assert [type(s) for s in sols] == [nj.Solution, nj.Solution]
+    single = nj.simulate(BALL, nj.DS(), 0.0, 1.0, 2e-3, [1.0], [0.0])
+    np.testing.assert_allclose(sols[1].q, single.q, rtol=0, atol=1e-12)
+    assert sols[1].stats["iterations"] == single.stats["iterations"]
