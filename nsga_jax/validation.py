@@ -175,7 +175,7 @@ def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 
         raise ConfigError(
             f"keeping the records of {records} steps needs about {gigabytes(kept)} "
             f"({record_numbers} numbers a step{f' for each of {members} runs' if members > 1 else ''}), more than "
-            f"the {gigabytes(limit - dense)} left; keep every k-th step (record_every / --record-every) "
+            f"the {gigabytes(limit - dense)} left; keep every k-th step (SaveAt(every=k), record_every / --record-every) "
             "or shorten the run")
 
 
