@@ -183,11 +183,11 @@ def with_observables(sol: Solution, observables: Observables | None) -> Solution
     float64, from the possibly float32 states)."""
     if observables is None:
         return sol
-    values = {k: np.asarray(v) for k, v in observables(_float64_view(sol)).items()}
+    values = {k: np.asarray(v) for k, v in observables(float64_view(sol)).items()}
     return dataclasses.replace(sol, observables=values)
 
 
-def _float64_view(sol: Solution) -> Solution:
+def float64_view(sol: Solution) -> Solution:
     """``sol`` with its floating-point arrays in float64 (itself if they are)."""
     if np.asarray(sol.q).dtype == np.float64:
         return sol

@@ -41,7 +41,7 @@ from .monitors import RunTotals
 from .precision import _cast, precision
 from .results import ConfigError
 from .scenes.base import configure
-from .solution import Solution, _float64_view
+from .solution import Solution, float64_view
 from .tables import read_csv, write_csv
 from .validation import step_count
 
@@ -144,7 +144,7 @@ def _row(member: Member, sol: Solution) -> dict[str, Any]:
         "max_bilateral_violation": st["max_bilateral_violation_position"],
         "max_bilateral_rate_violation": st["max_bilateral_violation_velocity"],
     })
-    view = _float64_view(sol)
+    view = float64_view(sol)
     obs = {k: np.asarray(v) for k, v in scene.observables(view).items()}
     for name, y in obs.items():
         if y.ndim != 1:

@@ -175,8 +175,8 @@ def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 
         raise ConfigError(
             f"keeping the records of {records} steps needs about {gigabytes(kept)} "
             f"({record_numbers} numbers a step{f' for each of {members} runs' if members > 1 else ''}), more than "
-            f"the {gigabytes(limit - dense)} left; keep every k-th step (SaveAt(every=k), record_every / --record-every) "
-            "or shorten the run")
+            f"the {gigabytes(limit - dense)} left; keep every k-th step (SaveAt(every=k), record_every / "
+            "--record-every) or shorten the run")
 
 
 __all__ = ["MAX_STEPS", "check_memory", "choice", "describe", "integer", "real", "require_instance",
