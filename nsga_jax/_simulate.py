@@ -229,7 +229,7 @@ def simulate(
     if saveat.chunks is not None:
         from .output import chunk_files  # only here: the output module loads plotting
 
-        on_chunk = _both(chunk_files(saveat.chunks), on_chunk)
+        on_chunk = chunk_files(saveat.chunks, then=on_chunk)
     with precision(dtype):
         run, totals, error = _host_loop(*_cast((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
                                         v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
@@ -244,18 +244,6 @@ def simulate(
     if strict and any(w.startswith(ENERGY_WARNING) for w in sol.warnings):
         raise InvariantError(next(w for w in sol.warnings if w.startswith(ENERGY_WARNING)), sol)
     return sol
-
-
-def _both(first: Callable[[int, StepOutput], None], second: Callable[[int, StepOutput], None] | None):
-    """One ``on_chunk`` callback calling ``first`` then ``second`` (if any)."""
-    if second is None:
-        return first
-
-    def both(k: int, records: StepOutput) -> None:
-        first(k, records)
-        second(k, records)
-
-    return both
 
 
 class InvariantWarning(UserWarning):

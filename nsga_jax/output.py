@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
 
@@ -26,10 +27,10 @@ RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bil
                  "iterations", "residual", "result")
 
 
-def chunk_files(folder: str | Path):
+def chunk_files(folder: str | Path, then: Callable[[int, StepOutput], None] | None = None):
     """An ``on_chunk`` callback that saves chunk k's records as
     ``folder/chunk_XXXXX.npz`` (what ``SaveAt(chunks=folder)`` makes
-    :func:`~nsga_jax.simulate` do)."""
+    :func:`~nsga_jax.simulate` do), then calls ``then(k, records)`` if given."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
 
@@ -38,6 +39,8 @@ def chunk_files(folder: str | Path):
         tmp = folder / f"chunk_{k:05d}.tmp.npz"
         np.savez(tmp, **cast(dict[str, Any], arrays))  # numpy's stub would let **arrays fill allow_pickle
         tmp.rename(folder / f"chunk_{k:05d}.npz")
+        if then is not None:
+            then(k, records)
 
     return write
 

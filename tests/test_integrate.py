@@ -126,10 +126,12 @@ def test_each_entry_point_refuses_what_only_the_other_honours(tmp_path):
 
 
 def test_saveat_chunks_writes_every_step_to_disk(tmp_path):
+    seen = []
     sol = nj.simulate(BALL, nj.DS(), 0.0, 0.5, 1e-3, [1.0], [0.0], chunk_size=64,
-                      saveat=nj.SaveAt(every=10, chunks=tmp_path / "steps"))
+                      saveat=nj.SaveAt(every=10, chunks=tmp_path / "steps"), on_chunk=lambda k, r: seen.append(k))
     steps = load_chunks(tmp_path / "steps", ".")
     assert steps["t"].shape == (500,) and sol.ts.shape == (51,)
+    assert seen == list(range(8))  # the callback still sees every chunk
     np.testing.assert_array_equal(steps["q"][9::10], sol.q[1:])
 
 
