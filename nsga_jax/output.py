@@ -168,12 +168,13 @@ def plot_iterations(sol: Solution, path: Path, scene: str = "", *, scheme: str =
 
 def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]:
     """Concatenate the chunk files in ``DIR/partial`` (an interrupted run) or
-    ``DIR/steps`` (every step of a run with ``record_every > 1``)."""
+    ``DIR/steps`` (every step of a run with ``record_every > 1``); ``subproblems``
+    names the columns of ``iterations`` and ``residual``."""
     files = sorted((Path(out_dir) / folder).glob("chunk_?????.npz"))
     if not files:
         return {}
     parts = [dict(np.load(f)) for f in files]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return {k: parts[0][k] if k == "subproblems" else np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 __all__ = ["chunk_writer", "write_run", "summary", "load_chunks", "plot_observables", "plot_iterations",

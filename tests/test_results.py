@@ -111,3 +111,20 @@ def test_the_differentiable_trajectory_raises_the_members_message():
     traj = nj.trajectory(model, nj.DS(), 0.0, 0.01, 10, jnp.ones(1), jnp.zeros(1), throw=False)
     assert bool(traj.failed)
     assert Result(int(traj.records.result[5])) == Result.smooth_nonfinite
+
+
+def test_iteration_plots_name_each_schemes_subproblems(ball_runs, tmp_path):
+    from nsga_jax import plotting
+    from nsga_jax.output import plot_iterations
+
+    titles = {"ds": ["smooth motion", "position correction", "velocity jump"],
+              "cs": ["coupled (CS) iteration"], "mj": ["Moreau–Jean (velocity-level)"]}
+    for scheme, sol in ball_runs.items():
+        with plotting.capture() as figures:
+            plot_iterations(sol, tmp_path / f"{scheme}.png", "bouncing_ball", scheme=scheme)
+        (fig,) = figures.values()
+        axes = [ax for ax in fig.axes if ax.get_visible()]
+        assert [ax.get_title(loc="left").split(":")[0] for ax in axes] == titles[scheme]
+        for i, ax in enumerate(axes):
+            (stairs,) = ax.patches
+            np.testing.assert_array_equal(stairs.get_data().values, sol.iterations[1:, i])
