@@ -36,9 +36,10 @@ from jax import lax
 
 from ._custom_types import Scalar
 from .events import initially_active, with_impact_time_sensitivity
-from .integrators.base import AbstractScheme, StepOutput, StepState
+from .integrators.base import AbstractScheme, StepState
+from .integrators.records import StepOutput
 from .models.base import Model
-from .results import ConfigError, Result
+from .results import RESULTS, ConfigError, from_code
 from .validation import check_model_fields, check_scheme, describe, integer, require_instance
 
 ADJOINTS = ("discrete", "event")
@@ -52,7 +53,7 @@ class Trajectory(eqx.Module):
     """Times, states and per-step records of a differentiable run.
 
     ``ts`` (N+1,); ``q``, ``v`` (N+1, n); ``records``: the stacked
-    :class:`~nsga_jax.integrators.base.StepOutput` of the N steps (or what
+    :class:`~nsga_jax.integrators.records.StepOutput` of the N steps (or what
     ``observe`` returned); ``h`` the step [s]; ``gap0`` the gaps at t0.
     ``impulse`` and ``gap`` have the initial row prepended, like a
     :class:`~nsga_jax.Solution`, so scene observables apply to both.
@@ -77,7 +78,7 @@ class Trajectory(eqx.Module):
     @property
     def failed(self) -> jax.Array:
         """Whether any step failed (Newton cap or non-finite value)."""
-        return jnp.any(self.records.result != Result.successful)
+        return jnp.any(from_code(self.records.result) != RESULTS.successful)
 
 
 def trajectory(
@@ -189,11 +190,9 @@ def trajectory(
         records, result = outs
         q = v = jnp.zeros((0, model.n_dof), dtype)
     ts = t0 + h * jnp.arange(n_steps + 1, dtype=dtype)
-    if throw:
-        ts = eqx.error_if(
-            ts, jnp.any(result != Result.successful),
-            "a step failed (Newton iteration cap or a non-finite value); call nsga_jax.simulate with the "
-            "same model and scheme for the step, time and sub-problem, or pass throw=False",
-        )
+    if throw:  # the first failed step's member names the failure; simulate names its step and time
+        failed = from_code(result) != RESULTS.successful
+        first = from_code(result[jnp.argmax(failed)])
+        ts = first.error_if(ts, jnp.any(failed))
     gap0 = model.unilateral(q0)
     return Trajectory(ts=ts, q=q, v=v, records=records, h=h, gap0=gap0)

@@ -10,9 +10,9 @@ from typing import Any
 import jax
 import numpy as np
 
-from .integrators.base import StepOutput
+from .integrators.records import StepOutput, SubproblemRecord
 from .monitors import RunTotals
-from .results import Result
+from .results import HostResult
 
 Observe = Callable[["Solution"], dict[str, np.ndarray]]
 
@@ -25,20 +25,21 @@ class Solution:
     Every per-time array has a leading axis of length N + 1 (the initial state
     first), or, with ``record_every = k > 1``, one entry per k steps plus the
     initial and the last step. Record fields (``impulse``, ``nu``, ``lam``,
-    ``iterations``, ``result``...) are zero at index 0. ``stats`` and
+    ``newton``, ``result``...) are zero at index 0. ``stats`` and
     ``failed_steps`` always cover every step.
 
     Attributes:
         ts: times [s], (N+1,).
         q, v: coordinates and velocities, (N+1, n).
-        records: :class:`~nsga_jax.integrators.ds.StepOutput` with NumPy leaves, (N+1, ...).
+        records: :class:`~nsga_jax.integrators.records.StepOutput` with NumPy leaves, (N+1, ...).
         observables: named scene quantities, each (N+1,).
         h: step size [s]; n_steps: steps actually taken (fewer than requested
             when a failure stopped the run).
-        result: the first failure's :class:`Result` (``successful`` if none).
+        result: the first failure's :data:`~nsga_jax.results.Result` (``successful`` if none).
         totals: statistics over every step (accumulated while running; computed
             from ``records`` when not given).
-        stats: iteration statistics, failures, constraint violations, timings.
+        stats: iteration statistics (per sub-problem name), failures, constraint
+            violations, timings.
     """
 
     ts: np.ndarray
@@ -48,7 +49,7 @@ class Solution:
     h: float
     n_steps: int
     n_steps_requested: int
-    result: Result
+    result: HostResult
     wall_time: float
     compile_time: float
     observables: dict[str, np.ndarray] = field(default_factory=dict)
@@ -62,9 +63,21 @@ class Solution:
             self.totals.add(jax.tree_util.tree_map(lambda x: np.asarray(x)[1:], self.records), first_step=1)
 
     @property
+    def subproblems(self) -> tuple[str, ...]:
+        """The scheme's sub-problems, in the order of :attr:`iterations`' columns
+        (DS, DSn: smooth, position, velocity; CS: coupled; MJ: moreau_jean)."""
+        return tuple(self.records.newton.names)
+
+    @property
     def iterations(self) -> np.ndarray:
-        """Newton iterations (N+1, 3): smooth, position, velocity."""
-        return np.asarray(self.records.iterations)
+        """Newton iterations (linear solves) per step, (N+1, k): one column per
+        sub-problem in the order of :attr:`subproblems` (DS: smooth, position, velocity)."""
+        return np.asarray(self.records.newton.iterations)
+
+    def newton(self, subproblem: str) -> SubproblemRecord:
+        """One sub-problem's iterations, final residuals and bounds, each (N+1,),
+        by its name (``sol.newton("position").iterations``)."""
+        return self.records.newton[subproblem]
 
     @property
     def failed_steps(self) -> np.ndarray:
@@ -87,7 +100,6 @@ class Solution:
     def stats(self) -> dict:
         tot = self.totals
         assert tot is not None  # set by __post_init__
-        n = max(tot.n_steps, 1)
         stats: dict[str, Any] = {
             "n_steps": int(self.n_steps),
             "h": float(self.h),
@@ -95,17 +107,13 @@ class Solution:
             "compile_time_s": float(self.compile_time),
             "compile_source": self.compile_source,
             "us_per_step": 1e6 * float(self.wall_time) / max(int(self.n_steps), 1),
-            "iterations": {
-                name: {"mean": float(tot.iterations_sum[i] / n), "max": int(tot.iterations_max[i])}
-                for i, name in enumerate(("smooth", "position", "velocity"))
-            },
+            "iterations": tot.iteration_stats(),
             "failed_steps": len(tot.failed),
             "result": self.result.name,
             "max_penetration": float(max(0.0, -tot.min_gap)),
             "max_bilateral_violation_position": float(tot.max_bilateral),
             "max_bilateral_violation_velocity": float(tot.max_bilateral_rate),
         }
-        stats["iterations"]["linear_solves"] = {"mean": float(tot.solves_sum / n), "max": int(tot.solves_max)}
         stats["energy"] = tot.energy_stats()
         stats["warnings"] = list(self.warnings)
         return stats

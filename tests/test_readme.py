@@ -81,6 +81,10 @@ def _python_api_simulate(ns):
     assert ns["model"].e == 0.8
 
 
+def _python_api_failures(ns):
+    assert ns["first"] == ns["Result"].position_max_iter and ns["first"].subproblem == "position"
+
+
 def _python_api_batches(ns):
     assert [s.n_steps for s in ns["sols"]] == [1500, 750, 375]
     assert all(s.stats["failed_steps"] == 0 for s in ns["sols"])
@@ -121,6 +125,7 @@ CHECKS = {
     ("README.md", "## A first example"): _readme_first_example,
     ("docs/python-api.md", "## Running a model: `simulate`"): _python_api_simulate,
     ("docs/python-api.md", "## Batches"): _python_api_batches,
+    ("docs/python-api.md", "## Failures"): _python_api_failures,
     ("docs/python-api.md", "## Writing a model"): _python_api_model,
     ("docs/gradients.md", "## Gradients through whole trajectories"): _gradients,
     ("docs/sweeps-and-devices.md", "## Sweeps"): _sweep,
