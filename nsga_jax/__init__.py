@@ -26,7 +26,7 @@ _FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler"
 if _FLAG not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + f" {_FLAG}=false").strip()
 
-from .results import ConfigError, ConvergenceError, InvariantError, Result  # noqa: E402  (no JAX)
+from .results import ConfigError, ConvergenceError, InvariantError  # noqa: E402  (no JAX)
 
 __version__ = "0.1.0"
 
@@ -37,7 +37,9 @@ _LAZY = {
     "simulate": "._simulate",
     "simulate_batch": ".batch",
     "AbstractScheme": ".integrators.base",
-    "StepOutput": ".integrators.base",
+    "StepOutput": ".integrators.records",
+    "Result": ".results",
+    "RESULTS": ".results",
     "StepState": ".integrators.base",
     "GenAlphaCoefficients": ".integrators.coefficients",
     "CS": ".integrators.cs",
@@ -88,6 +90,7 @@ __all__ = [
     "RigidPendulum",
     "ElasticBar",
     "Result",
+    "RESULTS",
     "ConfigError",
     "ConvergenceError",
     "InvariantError",

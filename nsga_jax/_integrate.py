@@ -36,11 +36,12 @@ import numpy as np
 from jax import lax
 
 from .events import initially_active, with_impact_time_sensitivity
-from .integrators.base import AbstractScheme, Operators, StepOutput, StepState, output_template
+from .integrators.base import AbstractScheme, Operators, StepState
+from .integrators.records import StepOutput, output_template
 from .models.base import Model
-from .results import ConfigError, Result
+from .results import RESULTS, ConfigError, from_code
 from .saveat import HOST_ONLY, SaveAt, refuse
-from .solution import Solution, first_failure, traced_stats
+from .solution import Solution, first_failed_code, traced_stats
 from .validation import check_model_fields, check_scheme, describe, integer, require_instance, time_grid
 
 ADJOINTS = ("discrete", "event")
@@ -117,10 +118,10 @@ def _step_count(t0, t1, h, n_steps: int | None) -> int:
     return n_steps
 
 
-def _initial_record(model: Model, t0, q0, v0, dtype) -> StepOutput:
+def _initial_record(model: Model, subproblems: tuple[str, ...], t0, q0, v0, dtype) -> StepOutput:
     """The row of t0: the initial state, its gaps and bilateral values, zero
     multipliers, iterations and result."""
-    zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), output_template(model, dtype))
+    zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), output_template(model, dtype, subproblems))
     return eqx.tree_at(lambda r: (r.t, r.q, r.v, r.gap, r.bilateral), zeros,
                        (t0, q0, v0, model.unilateral(q0), model.bilateral(q0)))
 
@@ -217,7 +218,7 @@ def integrate(
             new_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new_carry, carry)
         if fn is None:
             return new_carry, out
-        watched = (out.iterations, out.result, out.gap, out.bilateral, out.bilateral_rate)
+        watched = (out.newton.iterations, out.result, out.gap, out.bilateral, out.bilateral_rate)
         return new_carry, (fn(new, out), watched)
 
     if checkpoint_steps:
@@ -229,9 +230,9 @@ def integrate(
 
     _, outs = lax.scan(chunk, (state0, step.init(model, q0)), jnp.arange(n_chunks * c).reshape(n_chunks, c))
     outs = jax.tree_util.tree_map(lambda x: x.reshape((n_chunks * c,) + x.shape[2:])[:n_steps], outs)
-    first = _initial_record(model, t0, q0, v0, dtype)
+    first = _initial_record(model, scheme.subproblems, t0, q0, v0, dtype)
     if fn is None:
-        iterations, result, gap, bilateral, rate = (outs.iterations, outs.result, outs.gap, outs.bilateral,
+        iterations, result, gap, bilateral, rate = (outs.newton.iterations, outs.result, outs.gap, outs.bilateral,
                                                     outs.bilateral_rate)
         saved = _prepend(first, outs)
     else:
@@ -245,15 +246,12 @@ def integrate(
     else:
         q = v = jnp.zeros((0, model.n_dof), dtype)
     ts = t0 + h * jnp.asarray(kept, dtype)
-    if throw:
-        ts = eqx.error_if(
-            ts, jnp.any(result != Result.successful),
-            "a step failed (Newton iteration cap or a non-finite value); call nsga_jax.simulate with the "
-            "same model and scheme for the step, time and sub-problem, or pass throw=False",
-        )
-    return Solution(ts=ts, q=q, v=v, records=saved, result=first_failure(result),
-                    stats=traced_stats(iterations, result, gap, bilateral, rate), h=h, n_steps=n_steps,
-                    n_steps_requested=n_steps)
+    code = first_failed_code(result)
+    if throw:  # the first failed step's member names the failure; simulate names its step and time
+        ts = from_code(code).error_if(ts, from_code(code) != RESULTS.successful)
+    return Solution(ts=ts, q=q, v=v, records=saved, result=code,
+                    stats=traced_stats(scheme.subproblems, iterations, result, gap, bilateral, rate), h=h,
+                    n_steps=n_steps, n_steps_requested=n_steps)
 
 
 def _prepend(first, rows):

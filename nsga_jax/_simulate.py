@@ -32,19 +32,13 @@ import numpy as np
 from jax import lax
 
 from .compilation_cache import cache_events, compile_source
-from .diagnosis import CAPPED, FLOAT32_HINT, NONFINITE, nonfinite_origin
-from .integrators.base import (
-    AbstractScheme,
-    StepOutput,
-    output_template,
-    pack_output,
-    packed_sizes,
-    unpack_outputs,
-)
+from .diagnosis import FLOAT32_HINT, nonfinite_origin
+from .integrators.base import AbstractScheme
+from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
 from .precision import DTYPES, _cast, precision
-from .results import SUBPROBLEMS, ConvergenceError, InvariantError, Result
+from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
 from .saveat import DEVICE_ONLY, SaveAt, refuse
 from .solution import Observables, Solution, host_solution, with_observables
 from .validation import (
@@ -88,7 +82,7 @@ def _run_chunk(model, scheme, ops, state, h, t_start, steps, stop_on_failure, le
     step starts at ``t_start + i h`` (the host computes ``t_start = t0 + k h``
     in float64): time is never accumulated step by step. Runs with another h
     or another number of steps reuse the compilation."""
-    template = output_template(model, state.q.dtype)
+    template = output_template(model, state.q.dtype, scheme.subproblems)
     n_float, n_int = packed_sizes(template)
     buffer = (jnp.zeros((length, n_float), state.q.dtype), jnp.zeros((length, n_int), jnp.int32))
 
@@ -101,7 +95,7 @@ def _run_chunk(model, scheme, ops, state, h, t_start, steps, stop_on_failure, le
         state = eqx.tree_at(lambda s: s.t, state, t_start + i.astype(h.dtype) * h)
         state, out = scheme.step(model, ops, state, h)
         buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 0) for b, x in zip(buffer, pack_output(out)))
-        failed = out.result != Result.successful
+        failed = from_code(out.result) != RESULTS.successful
         return i + 1, state, stopped | (failed & stop_on_failure), buffer
 
     i, state, _, buffer = lax.while_loop(going, body, (jnp.zeros((), jnp.int32), state, jnp.zeros((), bool), buffer))
@@ -222,7 +216,7 @@ def simulate(
             raise TypeError(f"{name} must be a function or None, got {type(hook).__name__}")
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
     require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.monitors.Tolerances")
-    template = output_template(model, np.dtype(dtype))
+    template = output_template(model, np.dtype(dtype), scheme.subproblems)
     check_memory(model.n_dof, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
                  record_numbers=sum(packed_sizes(template)))
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
@@ -284,7 +278,7 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
     wall = time.perf_counter() - tw
     state0 = state
 
-    template = output_template(model, state.q.dtype)
+    template = output_template(model, state.q.dtype, scheme.subproblems)
     h_arr, stop = jnp.asarray(h, dtype), jnp.asarray(throw)
     shapes = (jnp.asarray(real(t0)), jnp.asarray(length, jnp.int32))
     tc = time.perf_counter()
@@ -355,18 +349,20 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         return run, totals, None
     step, out, i = first_failure
     result = Result(int(out.result[i]))
-    if result.subproblem in SUBPROBLEMS:
-        j = SUBPROBLEMS.index(result.subproblem)
-    else:  # a coupled iteration: report its worst residual
-        j = int(np.argmax(out.residual[i] / np.maximum(out.tolerance[i], 1e-300)))
+    names = out.newton.names
+    if result.subproblem in names:
+        name = result.subproblem
+    else:  # no sub-problem of this scheme named: report the one furthest from its bound
+        name = names[int(np.argmax(out.newton.residual[i] / np.maximum(out.newton.tolerance[i], 1e-300)))]
+    failed = out.newton[name]
     err = ConvergenceError(
         step=step,
         time=t0 + step * h,
         result=result,
-        residual=float(out.residual[i, j]),
-        tolerance=float(out.tolerance[i, j]),
-        hint=(FLOAT32_HINT if dtype == "float32" and result in CAPPED
-              else nonfinite_origin(ops, state0) if result in NONFINITE else ""),
+        residual=float(failed.residual[i]),
+        tolerance=float(failed.tolerance[i]),
+        hint=(FLOAT32_HINT if dtype == "float32" and result.capped
+              else nonfinite_origin(ops, state0) if result.nonfinite else ""),
     )
     return run, totals, err
 

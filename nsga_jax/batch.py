@@ -30,8 +30,9 @@ from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._simulate import _prepare_and_init_raw, _prepend_initial, chunk_length
-from .integrators.base import AbstractScheme, StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
+from .integrators.base import AbstractScheme
 from .integrators.linalg import bounded_lapack_batches
+from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import RunTotals
 from .precision import DTYPES, _cast, precision
@@ -127,7 +128,7 @@ def _run_members(model, scheme, ops, state, h, t_start, steps, length: int):
     makes views, where unpacking here would copy every record once more).
     """
     step = jax.vmap(lambda m, s, o, st, hh: s.step(m, o, st, hh))
-    n_float, n_int = packed_sizes(output_template(model, state.q.dtype))
+    n_float, n_int = packed_sizes(output_template(model, state.q.dtype, scheme.subproblems))
     B = len(h)
     buffer = (jnp.zeros((B, length, n_float), state.q.dtype), jnp.zeros((B, length, n_int), jnp.int32))
     mask = jnp.zeros((B, length), bool)
@@ -231,7 +232,7 @@ class BatchRun:
         jax.block_until_ready(self._carry)
         self.wall_time = time.perf_counter() - tw
         self._args = (args[0], args[1])
-        self._template = output_template(model, self._carry.q.dtype)
+        self._template = output_template(model, self._carry.q.dtype, scheme.subproblems)
         self._hs = np.asarray(hs)
         self._t0 = float(t0)
         self._n_steps = np.asarray(n_steps, dtype=np.int64)
@@ -325,7 +326,7 @@ def simulate_batch(
     if mesh is not None:
         require_instance("mesh", mesh, Mesh, "a jax.sharding.Mesh (nsga_jax.batch.member_mesh)")
     n_steps = np.array([g[3] for g in grids])
-    template = output_template(model, np.dtype(dtype))
+    template = output_template(model, np.dtype(dtype), scheme.subproblems)
     check_memory(model.n_dof, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
                  record_numbers=sum(packed_sizes(template)), what="each run's model")
     B = len(hs)

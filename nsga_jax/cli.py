@@ -73,12 +73,11 @@ def _run(args) -> int:
                     "error": str(failure) if failure else None})
     paths = write_run(sol, out, info)
     st = sol.stats
-    it = st["iterations"]
+    iterations = ", ".join(f"{name} {it['mean']:.2f}/{it['max']}" for name, it in st["iterations"].items()
+                           if name != "linear_solves")
     print(f"{st['n_steps']} steps in {st['wall_time_s']:.3f} s ({st['us_per_step']:.1f} us/step), "
           f"compile {st['compile_time_s']:.2f} s ({st['compile_source']}); Newton iterations mean/max: "
-          f"smooth {it['smooth']['mean']:.2f}/{it['smooth']['max']}, "
-          f"position {it['position']['mean']:.2f}/{it['position']['max']}, "
-          f"velocity {it['velocity']['mean']:.2f}/{it['velocity']['max']}; "
+          f"{iterations}; "
           f"failed steps {st['failed_steps']}; max penetration {st['max_penetration']:.2e} m; "
           f"bilateral violation {st['max_bilateral_violation_position']:.2e} m"
           + _energy_text(st["energy"]))

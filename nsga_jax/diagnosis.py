@@ -9,15 +9,11 @@ import jax
 import numpy as np
 
 from .integrators.base import Operators, StepState
-from .results import Result
 
-CAPPED = (Result.smooth_max_iter, Result.position_max_iter, Result.velocity_max_iter, Result.coupled_max_iter)
 FLOAT32_HINT = (
     "The run is in float32 (eps = 1.2e-7): if the residual is within a few hundred eps of the size of "
     "its terms, the limit is the precision; rerun in float64."
 )
-NONFINITE = (Result.smooth_nonfinite, Result.position_nonfinite, Result.velocity_nonfinite)
-
 OPERATOR_NAMES = {
     "M": "the mass matrix", "K": "the stiffness matrix", "C": "the damping matrix",
     "G": "the constraint Jacobian",

@@ -42,7 +42,6 @@ from ._custom_types import Scalar, Vector
 from .integrators.base import (
     ROUNDOFF_FACTOR,
     Operators,
-    StepOutput,
     StepState,
     consistent_acceleration,
     constraint_jacobian,
@@ -50,6 +49,7 @@ from .integrators.base import (
     restitution,
 )
 from .integrators.linalg import dense_solve, masked_solve
+from .integrators.records import StepOutput
 from .models.base import Model
 
 NEWTON_ITERATIONS = 6

@@ -2,7 +2,7 @@
 
 :class:`RunTotals` adds up, chunk by chunk on the host, statistics over every
 step of a run (also those a strided record leaves out): Newton iterations per
-sub-problem, failed steps, the largest penetration and bilateral violations,
+sub-problem (named as the scheme names them), failed steps, the largest penetration and bilateral violations,
 and, for a model with an ``energy(q, v)``, the energy at the start and the
 end, the largest rise over one step and the largest rise over one step with a
 contact impulse (an *impact step*). :func:`invariant_warnings` compares them
@@ -59,15 +59,17 @@ def default_tolerances(dtype: str = "float64") -> Tolerances:
 class RunTotals:
     """Statistics over every step of a run, added chunk by chunk, so that they
     cover the steps a strided record leaves out: Newton iterations (sum and max
-    per sub-problem, and of their total, the linear solves per step), failed
+    per sub-problem, in the order of ``subproblems``, the scheme's names, taken
+    from the first records added; and of their total, the linear solves per step), failed
     step numbers and the first one's result code, the smallest gap [m], the
     largest bilateral violations (position [m], velocity [m/s]) and the
     energy monitors [J] (when energies are given)."""
 
     n_bilateral: int = 0
     n_steps: int = 0
-    iterations_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    iterations_max: np.ndarray = field(default_factory=lambda: np.zeros(3, int))
+    subproblems: tuple[str, ...] = ()
+    iterations_sum: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    iterations_max: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     solves_sum: float = 0.0
     solves_max: int = 0
     failed: list[int] = field(default_factory=list)
@@ -94,9 +96,13 @@ class RunTotals:
         """Add consecutive steps ``first_step, first_step + 1, ...`` (NumPy
         records), with the energy and kinetic energy after each step, shape
         (steps, 2), where the model has an energy."""
-        it = np.asarray(records.iterations)
+        it = np.asarray(records.newton.iterations)
         if not len(it):
             return
+        if not self.subproblems:
+            self.subproblems = tuple(records.newton.names)
+            self.iterations_sum = np.zeros(len(self.subproblems))
+            self.iterations_max = np.zeros(len(self.subproblems), int)
         self.n_steps += len(it)
         self.iterations_sum += it.sum(axis=0)
         self.iterations_max = np.maximum(self.iterations_max, it.max(axis=0))
@@ -138,6 +144,16 @@ class RunTotals:
                 self.max_impact_energy_rise = float(rise[i])
                 self.max_impact_energy_rise_step = first_step + i
         self.energy_last = float(energies[finite][-1]) if finite[-1] else self.energy_last
+
+    def iteration_stats(self) -> dict[str, dict[str, float | int]]:
+        """Mean and max iterations (linear solves) per step of each sub-problem,
+        by name, and of their total (``"linear_solves"``)."""
+        n = max(self.n_steps, 1)
+        stats: dict[str, dict[str, float | int]] = {
+            name: {"mean": float(self.iterations_sum[i] / n), "max": int(self.iterations_max[i])}
+            for i, name in enumerate(self.subproblems)}
+        stats["linear_solves"] = {"mean": float(self.solves_sum / n), "max": int(self.solves_max)}
+        return stats
 
     @property
     def has_energy(self) -> bool:

@@ -19,12 +19,13 @@ from typing import Any, cast
 import numpy as np
 
 from . import plotting
-from .integrators.base import StepOutput
+from .integrators.records import StepOutput
 from .results import ConfigError
 from .solution import Solution
 
-RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bilateral_rate",
-                 "iterations", "residual", "result")
+RECORD_FIELDS = ("t", "q", "v", "lam", "nu", "impulse", "gap", "bilateral", "bilateral_rate", "result")
+"""The record fields each chunk file holds, besides the Newton statistics
+(``iterations`` and ``residual``, (steps, k), with the sub-problems' names in ``subproblems``)."""
 
 
 def chunk_files(folder: str | Path, then: Callable[[int, StepOutput], None] | None = None):
@@ -36,6 +37,8 @@ def chunk_files(folder: str | Path, then: Callable[[int, StepOutput], None] | No
 
     def write(k: int, records: StepOutput) -> None:
         arrays = {f: np.asarray(getattr(records, f)) for f in RECORD_FIELDS}
+        arrays.update(iterations=np.asarray(records.newton.iterations), residual=np.asarray(records.newton.residual),
+                      subproblems=np.asarray(records.newton.names))
         tmp = folder / f"chunk_{k:05d}.tmp.npz"
         np.savez(tmp, **cast(dict[str, Any], arrays))  # numpy's stub would let **arrays fill allow_pickle
         tmp.rename(folder / f"chunk_{k:05d}.npz")
@@ -66,7 +69,8 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, P
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {}
     arrays = {"t": sol.ts, "q": sol.q, "v": sol.v,
-              "iterations": sol.iterations, "result": np.asarray(sol.records.result),
+              "iterations": sol.iterations, "subproblems": np.asarray(sol.subproblems),
+              "result": np.asarray(sol.records.result),
               "impulse": sol.impulse, "gap": sol.gap}
     for name, values in sol.observables.items():
         arrays[name] = values
@@ -144,15 +148,17 @@ def plot_observables(sol: Solution, path: Path, scene: str = "", *, scheme: str 
 
 def plot_iterations(sol: Solution, path: Path, scene: str = "", *, scheme: str = "") -> Path:
     """``iterations.png``: the Newton iterations (linear solves) of each step,
-    as stairs over the step's time interval, one panel per sub-problem (smooth
-    motion, position correction, velocity jump), integer ticks; failed steps
-    are red crosses along the top of each panel."""
+    as stairs over the step's time interval, one panel per sub-problem of the
+    scheme (DS: smooth motion, position correction, velocity jump; CS: its
+    coupled iteration; MJ: its one step), integer ticks; failed steps are red
+    crosses along the top of each panel."""
     it = np.asarray(sol.iterations)
+    names = plotting.subproblem_labels(getattr(sol, "subproblems", None), it.shape[1])
     failed = _failure_times(sol)
     top = max(1, int(it[1:].max(initial=0)))
     with plotting.style():
-        fig, axes = plotting.figure(3, 1, panel=(7.0, 1.45), sharex=True, sharey=True)
-        for i, (ax, name) in enumerate(zip(axes[:, 0], plotting.SUBPROBLEMS)):
+        fig, axes = plotting.figure(len(names), 1, panel=(7.0, 1.45), sharex=True, sharey=True)
+        for i, (ax, name) in enumerate(zip(axes[:, 0], names)):
             counts = it[1:, i]
             ax.stairs(counts, np.asarray(sol.ts), baseline=None, lw=1.0)
             mean = float(counts.mean()) if counts.size else 0.0
@@ -174,12 +180,13 @@ def plot_iterations(sol: Solution, path: Path, scene: str = "", *, scheme: str =
 def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]:
     """Concatenate the chunk files in ``DIR/partial`` (an interrupted run) or
     ``DIR/steps`` (every step of a run with ``record_every > 1``); any folder
-    ``SaveAt(chunks=folder)`` wrote is ``load_chunks(folder, ".")``."""
+    ``SaveAt(chunks=folder)`` wrote is ``load_chunks(folder, ".")``. ``subproblems``
+    names the columns of ``iterations`` and ``residual``."""
     files = sorted((Path(out_dir) / folder).glob("chunk_?????.npz"))
     if not files:
         return {}
     parts = [dict(np.load(f)) for f in files]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return {k: parts[0][k] if k == "subproblems" else np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 __all__ = ["chunk_files", "chunk_writer", "write_run", "summary", "load_chunks", "plot_observables",

@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .results import SUBPROBLEM_LABELS
+
 if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
 
@@ -65,7 +67,15 @@ SCHEME_STYLE = {
 first), so that identical curves of several schemes stay visible."""
 
 SUBPROBLEMS = ("smooth motion", "position correction", "velocity jump")
-"""The three sub-problems of a step, in the order of ``Solution.iterations``."""
+"""The three sub-problems of a DS step, in the order of its ``Solution.iterations``."""
+
+
+def subproblem_labels(names, count: int) -> tuple[str, ...]:
+    """What plots call a scheme's sub-problems (``Solution.subproblems``); without
+    names, DS's three (or ``sub-problem i``) for ``count`` columns."""
+    if names:
+        return tuple(SUBPROBLEM_LABELS.get(n, n) for n in names)
+    return SUBPROBLEMS if count == len(SUBPROBLEMS) else tuple(f"sub-problem {i + 1}" for i in range(count))
 
 
 # ------------------------------------------------------------ figures, saving
@@ -304,7 +314,8 @@ def hide_unused(axes, used: int) -> None:
 # ------------------------------------------------------------------ sweeps
 
 
-__all__ = ["STYLE", "SCHEME_STYLE", "SUBPROBLEMS", "style", "figure", "save", "capture", "scene_spec",
+__all__ = ["STYLE", "SCHEME_STYLE", "SUBPROBLEMS", "subproblem_labels", "style", "figure", "save", "capture",
+           "scene_spec",
            "observable_unit", "parameter_unit", "unit_text", "label", "h_text", "title", "scheme_style",
            "integer_ticks", "log_ticks", "plain_ticks", "flat_limits", "bottom_labels", "figure_legend",
            "hide_unused"]

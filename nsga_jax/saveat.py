@@ -15,7 +15,8 @@ from typing import Any
 
 import equinox as eqx
 
-from .integrators.base import StepOutput, StepState
+from .integrators.base import StepState
+from .integrators.records import StepOutput
 from .results import ConfigError
 from .validation import describe
 

@@ -17,14 +17,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .integrators.records import SubproblemRecord
 from .monitors import RunTotals
-from .results import Result
+from .results import HostResult, Result
 
 Observables = Callable[["Solution"], dict[str, Any]]
 """``Solution -> {name: array (rows,)}``: named quantities of a finished run
 (a scene's observables)."""
-
-SUBPROBLEM_NAMES = ("smooth", "position", "velocity")
 
 
 class Solution(eqx.Module):
@@ -33,7 +32,7 @@ class Solution(eqx.Module):
     Every per-time array has a leading axis of one row per kept step (the
     initial state first): N + 1 rows, or with ``SaveAt(every=k)``, one per k
     steps plus the initial and the last step. Record fields (``impulse``,
-    ``nu``, ``lam``, ``iterations``, ``result``...) are zero in the initial
+    ``nu``, ``lam``, ``newton``, ``result``...) are zero in the initial
     row. ``stats``, ``failed_steps`` and ``result`` always cover every step.
 
     Attributes:
@@ -42,9 +41,10 @@ class Solution(eqx.Module):
             ``SaveAt.fn`` chose what to keep.
         records: the stacked :class:`~nsga_jax.StepOutput` of the kept rows,
             or what ``SaveAt.fn`` returned for them.
-        result: the first failure's :class:`~nsga_jax.Result` code
-            (``successful`` if none); a :class:`Result` from the host
-            drivers, an int8 array from :func:`~nsga_jax.integrate`.
+        result: the first failure's :data:`~nsga_jax.results.Result`
+            (``successful`` if none) from the host drivers; its code (an int32
+            array, :func:`~nsga_jax.results.from_code` gives the
+            :data:`~nsga_jax.RESULTS` member) from :func:`~nsga_jax.integrate`.
         stats: statistics over every step (:func:`host_stats`,
             :func:`traced_stats`): Newton iterations per sub-problem, failed
             steps, constraint violations; from the host drivers also the
@@ -78,9 +78,21 @@ class Solution(eqx.Module):
     warnings: list[str] = eqx.field(default_factory=list)
 
     @property
+    def subproblems(self) -> tuple[str, ...]:
+        """The scheme's sub-problems, in the order of :attr:`iterations`' columns
+        (DS, DSn: smooth, position, velocity; CS: coupled; MJ: moreau_jean)."""
+        return tuple(self.records.newton.names)
+
+    @property
     def iterations(self) -> Any:
-        """Newton iterations (rows, 3): smooth, position, velocity."""
-        return self.records.iterations
+        """Newton iterations (linear solves) per step, (rows, k): one column per
+        sub-problem in the order of :attr:`subproblems` (DS: smooth, position, velocity)."""
+        return self.records.newton.iterations
+
+    def newton(self, subproblem: str) -> SubproblemRecord:
+        """One sub-problem's iterations, final residuals and bounds, each (rows,),
+        by its name (``sol.newton("position").iterations``)."""
+        return self.records.newton[subproblem]
 
     @property
     def impulse(self) -> Any:
@@ -101,11 +113,10 @@ class Solution(eqx.Module):
 # ------------------------------------------------------------ statistics
 
 
-def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: Result, wall_time: float = 0.0,
+def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: HostResult, wall_time: float = 0.0,
                compile_time: float = 0.0, compile_source: str = "compiled",
                warnings: list[str] | None = None) -> dict[str, Any]:
     """A host run's ``Solution.stats`` from its running totals (Python numbers)."""
-    n = max(totals.n_steps, 1)
     stats: dict[str, Any] = {
         "n_steps": int(n_steps),
         "h": float(h),
@@ -113,36 +124,33 @@ def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: Result, wal
         "compile_time_s": float(compile_time),
         "compile_source": compile_source,
         "us_per_step": 1e6 * float(wall_time) / max(int(n_steps), 1),
-        "iterations": {
-            name: {"mean": float(totals.iterations_sum[i] / n), "max": int(totals.iterations_max[i])}
-            for i, name in enumerate(SUBPROBLEM_NAMES)
-        },
+        "iterations": totals.iteration_stats(),
         "failed_steps": len(totals.failed),
         "result": result.name,
         "max_penetration": float(max(0.0, -totals.min_gap)),
         "max_bilateral_violation_position": float(totals.max_bilateral),
         "max_bilateral_violation_velocity": float(totals.max_bilateral_rate),
     }
-    stats["iterations"]["linear_solves"] = {"mean": float(totals.solves_sum / n), "max": int(totals.solves_max)}
     stats["energy"] = totals.energy_stats()
     stats["warnings"] = list(warnings or [])
     return stats
 
 
-def traced_stats(iterations: jax.Array, result: jax.Array, gap: jax.Array, bilateral: jax.Array,
-                 bilateral_rate: jax.Array) -> dict[str, Any]:
+def traced_stats(subproblems: tuple[str, ...], iterations: jax.Array, result: jax.Array, gap: jax.Array,
+                 bilateral: jax.Array, bilateral_rate: jax.Array) -> dict[str, Any]:
     """``Solution.stats`` of :func:`~nsga_jax.integrate`, in JAX, from every
-    step's iterations (N, 3), result codes (N,), gaps (N, nu) [m] and
-    bilateral violations (N, nb) [m] and [m/s]: the keys of :func:`host_stats`
-    that need no host (no timings, energies or warnings)."""
+    step's iterations (N, k) of the scheme's ``subproblems``, result codes
+    (N,), gaps (N, nu) [m] and bilateral violations (N, nb) [m] and [m/s]: the
+    keys of :func:`host_stats` that need no host (no timings, energies or
+    warnings)."""
     solves = jnp.sum(iterations, axis=1)
     real = jnp.result_type(float)
     stats: dict[str, Any] = {
         "iterations": {
             name: {"mean": jnp.mean(iterations[:, i], dtype=real), "max": jnp.max(iterations[:, i])}
-            for i, name in enumerate(SUBPROBLEM_NAMES)
+            for i, name in enumerate(subproblems)
         },
-        "failed_steps": jnp.sum(result != Result.successful),
+        "failed_steps": jnp.sum(result != int(Result.successful)),
         "max_penetration": jnp.maximum(0.0, -jnp.min(gap, initial=jnp.inf)),
         "max_bilateral_violation_position": jnp.max(jnp.abs(bilateral), initial=0.0),
         "max_bilateral_violation_velocity": jnp.max(jnp.abs(bilateral_rate), initial=0.0),
@@ -151,17 +159,17 @@ def traced_stats(iterations: jax.Array, result: jax.Array, gap: jax.Array, bilat
     return stats
 
 
-def first_failure(result: jax.Array) -> jax.Array:
+def first_failed_code(result: jax.Array) -> jax.Array:
     """The result code of the first failed step in ``result`` (N,), or
-    ``successful`` (JAX)."""
-    bad = result != Result.successful
-    return jnp.where(jnp.any(bad), result[jnp.argmax(bad)], jnp.asarray(Result.successful, result.dtype))
+    ``successful``'s (JAX)."""
+    bad = result != int(Result.successful)
+    return jnp.where(jnp.any(bad), result[jnp.argmax(bad)], jnp.asarray(int(Result.successful), result.dtype))
 
 
 # ------------------------------------------------------------ host solutions
 
 
-def host_solution(records, *, ts: np.ndarray, h: float, n_steps: int, n_steps_requested: int, result: Result,
+def host_solution(records, *, ts: np.ndarray, h: float, n_steps: int, n_steps_requested: int, result: HostResult,
                   totals: RunTotals | None = None, wall_time: float = 0.0, compile_time: float = 0.0,
                   compile_source: str = "compiled", warnings: list[str] | None = None) -> Solution:
     """A host driver's :class:`Solution` from its NumPy records (initial row

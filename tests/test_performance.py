@@ -11,8 +11,8 @@ import pytest
 
 from nsga_jax import simulate
 from nsga_jax.bench import COLUMNS, _batched, _bench_scene, bench
-from nsga_jax.integrators.base import output_template
 from nsga_jax.integrators.linalg import band_product
+from nsga_jax.integrators.records import output_template
 from nsga_jax.results import ConfigError
 from nsga_jax.scenes import load_scene
 
@@ -127,7 +127,7 @@ def test_record_template_matches_the_step(name, scheme):
     ops = sch.prepare(model, 1e-3, 0.0)
     state = sch.init(model, 0.0, scene.q0, scene.v0)
     traced = jax.eval_shape(lambda s: sch.step(model, ops, s, 1e-3)[1], state)
-    assert traced == output_template(model, state.q.dtype)
+    assert traced == output_template(model, state.q.dtype, sch.subproblems)
 
 
 @pytest.mark.parametrize("settings, message", [

@@ -88,6 +88,10 @@ def _python_api_saveat(ns):
     assert math.isfinite(grad) and grad != 0.0
 
 
+def _python_api_failures(ns):
+    assert ns["first"] == ns["Result"].position_max_iter and ns["first"].subproblem == "position"
+
+
 def _python_api_batches(ns):
     assert [s.n_steps for s in ns["sols"]] == [1500, 750, 375]
     assert all(s.stats["failed_steps"] == 0 for s in ns["sols"])
@@ -129,6 +133,7 @@ CHECKS = {
     ("docs/python-api.md", "## Running a model: `integrate` and `simulate`"): _python_api_simulate,
     ("docs/python-api.md", "## Output control: `SaveAt`"): _python_api_saveat,
     ("docs/python-api.md", "## Batches"): _python_api_batches,
+    ("docs/python-api.md", "## Failures"): _python_api_failures,
     ("docs/python-api.md", "## Writing a model"): _python_api_model,
     ("docs/gradients.md", "## Gradients through whole trajectories"): _gradients,
     ("docs/sweeps-and-devices.md", "## Sweeps"): _sweep,

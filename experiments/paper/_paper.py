@@ -65,7 +65,8 @@ def read_study(results_dir: Path) -> tuple[str, list[StudyRow], Reference]:
         stats = [c[: -len("_mean")] for c in r if c.endswith("_mean")]
         rows.append(StudyRow(
             **{k: r[k] for k in STUDY_FIELDS},
-            iterations={s: {"mean": r[f"{s}_mean"], "max": r[f"{s}_max"]} for s in stats},
+            iterations={s: {"mean": r[f"{s}_mean"], "max": r[f"{s}_max"]} for s in stats
+                        if r[f"{s}_mean"] != ""},  # another scheme's sub-problem: blank in this row
             errors={c[len("error_"):]: float(v) for c, v in r.items() if c.startswith("error_")},
         ))
     return claims["scene"], rows, Reference(description=claims["reference"])

@@ -21,17 +21,16 @@ from jax import lax
 
 from .._custom_types import Scalar
 from ..models.base import Model
-from ..results import ConfigError, Result
+from ..results import RESULTS, ConfigError, from_code
 from .base import (
     DIVERGENCE_FACTOR,
     Operators,
-    StepOutput,
     StepState,
     constant_operators,
     constraint_jacobian,
-    make_output,
 )
 from .ds import DS, AbstractGenAlpha
+from .records import NewtonRecord, PositionAux, StepOutput, SubproblemRecord, VelocityAux, make_output
 from .subproblems import (
     position_problem,
     projection_start,
@@ -56,6 +55,7 @@ class CS(AbstractGenAlpha):
     """
 
     name = "cs"
+    subproblems = ("coupled",)
 
     def bounds(self):
         if self.differentiable:
@@ -77,8 +77,14 @@ class CS(AbstractGenAlpha):
         )
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
-        if model.n_constraints == 0:  # no jumps: CS and DS coincide
-            return DS(self.tol_r, self.tol_f, self.max_iter, rho_inf=self.rho_inf).step(model, ops, state, h)
+        if model.n_constraints == 0:  # no jumps: CS and DS coincide, the coupled iteration is the smooth one
+            new, out = DS(self.tol_r, self.tol_f, self.max_iter, rho_inf=self.rho_inf).step(model, ops, state, h)
+            smooth = from_code(out.result)
+            result = RESULTS.where(smooth == RESULTS.successful, RESULTS.successful,
+                                   RESULTS.where(smooth == RESULTS.smooth_nonfinite, RESULTS.coupled_diverged,
+                                                 RESULTS.coupled_max_iter))
+            newton = NewtonRecord.of(self.subproblems, {"coupled": out.newton["smooth"]}, new.q.dtype)
+            return new, make_output(model, out.t, out.q, out.v, out.lam, newton, result)
         tol = self.tolerances
         co = self.coefficients
         t = state.t + h
@@ -100,7 +106,7 @@ class CS(AbstractGenAlpha):
 
         def residuals(xs, xp, xv):
             rp = position_res(xs).residual(xp)
-            return smooth_res(xs, xp, xv).residual(xs), rp, velocity_res(xs, xp, rp.aux[0]).residual(xv)
+            return smooth_res(xs, xp, xv).residual(xs), rp, velocity_res(xs, xp, rp.aux.active).residual(xv)
 
         def norms(rs):
             return jnp.stack([jnp.linalg.norm(r.r) for r in rs])
@@ -122,7 +128,7 @@ class CS(AbstractGenAlpha):
             dxp, fp = position.update(xp, position.residual(xp))
             xp = _add(xp, dxp)
             rp = position.residual(xp)
-            velocity = velocity_res(xs, xp, rp.aux[0])
+            velocity = velocity_res(xs, xp, rp.aux.active)
             dxv, fv = velocity.update(xv, velocity.residual(xv))
             xv = _add(xv, dxv)
             rs_new = (smooth_res(xs, xp, xv).residual(xs), rp, velocity.residual(xv))
@@ -142,18 +148,25 @@ class CS(AbstractGenAlpha):
         carry = lax.while_loop(cond, sweep, (x0, r0, jnp.zeros(3, q_pred.dtype), jnp.zeros((), jnp.int32)))
         (xs, xp, xv), (rs, rp, rv), floors, it = carry
         converged, diverged = status((rs, rp, rv), floors)
-        result = jnp.where(converged, jnp.int8(Result.successful),
-                           jnp.where(diverged, jnp.int8(Result.coupled_diverged), jnp.int8(Result.coupled_max_iter)))
+        result = RESULTS.where(converged, RESULTS.successful,
+                               RESULTS.where(diverged, RESULTS.coupled_diverged, RESULTS.coupled_max_iter))
 
         smooth = as_smooth(xs)
         qt, vt, vd = smooth.q, smooth.v, smooth.vd
         U, W = xp[0], xv[0]
-        active_p, xi, g, _ = rp.aux
-        active_v, sigma, gdot = rv.aux
+        position: PositionAux = rp.aux
+        velocity: VelocityAux = rv.aux
         q, v = qt + U, vt + W
+        # one coupled iteration: three linear solves per global iteration; its residual is the block
+        # furthest from its bound
+        residual, bound = norms((rs, rp, rv)), bounds((rs, rp, rv)) + floors
+        worst = jnp.argmax(residual / jnp.maximum(bound, jnp.finfo(bound.dtype).tiny))
+        newton = NewtonRecord.of(self.subproblems, {"coupled": SubproblemRecord(3 * it, residual[worst], bound[worst])},
+                                 q.dtype)
         out = make_output(
-            model, t, q, v, rs.aux, [it, it, it], list(norms((rs, rp, rv))), list(bounds((rs, rp, rv)) + floors),
-            result, nu=jnp.where(active_p, xi, 0.0), impulse=jnp.where(active_v, sigma, 0.0), g=g, gdot=gdot,
-            active_position=active_p, active_velocity=active_v,
+            model, t, q, v, rs.aux, newton, result,
+            nu=jnp.where(position.active, position.multiplier, 0.0),
+            impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
+            active_position=position.active, active_velocity=velocity.active,
         )
         return self.finalise(t, q, v, vd, a_pred), out

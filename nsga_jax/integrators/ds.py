@@ -35,18 +35,25 @@ from ..models.base import Model
 from .base import (
     AbstractScheme,
     Operators,
-    StepOutput,
     StepState,
     consistent_acceleration,
     constant_operators,
     constraint_jacobian,
     force_at,
-    make_output,
-    result_code,
 )
 from .coefficients import GenAlphaCoefficients
 from .linalg import Factorisation
 from .newton import solve
+from .records import (
+    NewtonRecord,
+    PositionAux,
+    StepOutput,
+    SubproblemRecord,
+    VelocityAux,
+    first_failure,
+    make_output,
+    subproblem_result,
+)
 from .subproblems import (
     position_problem,
     projection_start,
@@ -112,6 +119,7 @@ class DS(AbstractGenAlpha):
     reuse_min_dof: int = eqx.field(static=True, default=100, kw_only=True)
 
     name = "ds"
+    subproblems = ("smooth", "position", "velocity")
 
     def reused(self, model: Model) -> tuple[bool, bool, bool]:
         """Which sub-problems (smooth, position, velocity) keep a factorisation
@@ -163,10 +171,8 @@ class DS(AbstractGenAlpha):
         smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
         qt, vt, vd = smooth.q, smooth.v, smooth.vd
         if model.n_constraints == 0:  # nothing to project: U = W = 0 exactly
-            zero = jnp.zeros(())
-            out = make_output(model, t, qt, vt, smooth.lam, [sol_s.iterations, 0, 0],
-                              [sol_s.residual_norm, zero, zero], [sol_s.tolerance, zero, zero],
-                              result_code([sol_s]))
+            newton = NewtonRecord.of(self.subproblems, {"smooth": SubproblemRecord.of(sol_s)}, qt.dtype)
+            out = make_output(model, t, qt, vt, smooth.lam, newton, subproblem_result("smooth", sol_s))
             return self.finalise(t, qt, vt, vd, a_pred, kept([sol_s], state)), out
 
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
@@ -174,23 +180,24 @@ class DS(AbstractGenAlpha):
         sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces),
                       projection_start(model, qt), self.max_iter, diff, held[1])
         U, _ = sol_p.x
-        active_p, xi, g, _ = sol_p.aux
+        position: PositionAux = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
-        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, active_p, f_smooth, G_prev_v_prev,
+        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth, G_prev_v_prev,
                                          self.nonsmooth_forces), projection_start(model, qt), self.max_iter, diff,
                       held[2])
         W, _ = sol_v.x
-        active_v, sigma, gdot = sol_v.aux
+        velocity: VelocityAux = sol_v.aux
 
         q, v = qt + U, vt + W
         results = [sol_s, sol_p, sol_v]
+        solved = dict(zip(self.subproblems, results))
+        newton = NewtonRecord.of(self.subproblems, {k: SubproblemRecord.of(r) for k, r in solved.items()}, q.dtype)
         out = make_output(
-            model, t, q, v, smooth.lam,
-            [r.iterations for r in results], [r.residual_norm for r in results], [r.tolerance for r in results],
-            result_code(results),
-            nu=jnp.where(active_p, xi, 0.0), impulse=jnp.where(active_v, sigma, 0.0), g=g, gdot=gdot,
-            active_position=active_p, active_velocity=active_v,
+            model, t, q, v, smooth.lam, newton, first_failure([subproblem_result(k, r) for k, r in solved.items()]),
+            nu=jnp.where(position.active, position.multiplier, 0.0),
+            impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
+            active_position=position.active, active_velocity=velocity.active,
         )
         return self.finalise(t, q, v, vd, a_pred, kept(results, state)), out
 

@@ -25,7 +25,6 @@ from .base import (
     AbstractScheme,
     Operators,
     Scaling,
-    StepOutput,
     StepState,
     augmented_residual,
     constant_operators,
@@ -34,16 +33,15 @@ from .base import (
     convective,
     curvature,
     is_unilateral,
-    make_output,
     mass_matrix,
     mass_product,
     restitution,
-    result_code,
     roundoff_floor,
     tangents,
 )
 from .linalg import dense_solve, inverse_solve, solve_bordered
 from .newton import Problem, Residual, convergence_bound, solve
+from .records import NewtonRecord, StepOutput, SubproblemRecord, VelocityAux, make_output, subproblem_result
 
 
 class MJ(AbstractScheme):
@@ -57,6 +55,7 @@ class MJ(AbstractScheme):
     theta: ScalarLike = eqx.field(default=0.5, converter=as_float, kw_only=True)
 
     name = "mj"
+    subproblems = ("moreau_jean",)
 
     def bounds(self):
         return {"theta": (self.theta, 0.0, 1.0)}
@@ -91,15 +90,15 @@ class MJ(AbstractScheme):
         sol = solve(moreau_jean_problem, args, x0, self.max_iter, self.differentiable)
         v, _ = sol.x
         q = q_n + h * (self.theta * v + (1.0 - self.theta) * v_n)
-        zero = jnp.zeros(())
-        code = result_code([sol])
-        code = jnp.where(code == 0, code, code + 2)  # MJ's one problem is reported as the velocity one
         kwargs = {}
         if model.n_constraints:
-            active, sigma, gdot = sol.aux
-            kwargs = dict(impulse=jnp.where(active, sigma, 0.0), gdot=gdot, active_velocity=active)
-        out = make_output(model, t, q, v, jnp.zeros((model.n_bilateral,), q.dtype), [0, 0, sol.iterations],
-                          [zero, zero, sol.residual_norm], [zero, zero, sol.tolerance], code, **kwargs)
+            aux: VelocityAux = sol.aux
+            kwargs = dict(impulse=jnp.where(aux.active, aux.multiplier, 0.0), gdot=aux.rate,
+                          active_velocity=aux.active)
+        (name,) = self.subproblems
+        newton = NewtonRecord.of(self.subproblems, {name: SubproblemRecord.of(sol)}, q.dtype)
+        out = make_output(model, t, q, v, jnp.zeros((model.n_bilateral,), q.dtype), newton,
+                          subproblem_result(name, sol), **kwargs)
         zero_n = jnp.zeros_like(q)
         return StepState(t=t, q=q, v=v, vd=zero_n, a=zero_n), out
 
@@ -126,7 +125,7 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
         G = constraint_jacobian(model, ops, q)
         gdot = G @ v + restituted
         res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
-        return res._replace(aux=res.aux + (gdot,))
+        return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
 
     def update(x, res):
         v, Lam = x

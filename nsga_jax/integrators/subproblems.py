@@ -52,6 +52,7 @@ from .base import (
 from .coefficients import GenAlphaCoefficients
 from .linalg import Factorisation, inverse_solve, solve_bordered
 from .newton import Problem, Residual, convergence_bound
+from .records import PositionAux, VelocityAux
 
 
 class Smooth(NamedTuple):
@@ -165,7 +166,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         inertia = mass_product(model, ops, smooth.q, U)
         force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
         res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
-        return res._replace(aux=res.aux + (g, G))
+        return res._replace(aux=PositionAux(*res.aux, gap=g, jacobian=G))
 
     def linearise(x, res):
         if ops.position_inv is not None:
@@ -242,7 +243,7 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             force = jnp.zeros_like(W)
         res = augmented_residual(mass_product(model, ops, q, W), force, G, gdot, Lam, kv, pv, candidates,
                                  unilateral, tol_r, tol_f)
-        return res._replace(aux=res.aux + (gdot,))
+        return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
 
     def linearise(x, res):
         if ops.velocity_inv is not None:
