@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._custom_types import Scalar
-from .events import initially_active, with_impact_time_sensitivity
+from .impact_time import initially_active, with_impact_time_sensitivity
 from .integrators.base import AbstractScheme, StepOutput, StepState
 from .models.base import Model
 from .results import ConfigError, Result
@@ -117,7 +117,7 @@ def trajectory(
             (impacts held at their steps); ``"event"``: at each step where a
             contact closes, the derivative of a continuous-time rebuild of the
             step, which sees the impact instant move
-            (:mod:`nsga_jax.events`). Values are the same in both modes.
+            (:mod:`nsga_jax.impact_time`). Values are the same in both modes.
 
     Returns:
         A :class:`Trajectory`.

@@ -136,7 +136,7 @@ def identify(
         true: the true values, when known (synthetic data), for the report.
         progress: print the loss and the parameters after each iteration (stderr).
         adjoint: ``"event"`` (default: gradients that see impact instants move,
-            :mod:`nsga_jax.events`) or ``"discrete"`` (the time-stepping map's
+            :mod:`nsga_jax.impact_time`) or ``"discrete"`` (the time-stepping map's
             own derivative); see :func:`~nsga_jax.trajectory`.
 
     One function is compiled: the loss, its gradient (through the whole
