@@ -51,6 +51,9 @@ _LAZY = {
     "Tolerances": ".monitors",
     "check_model": ".models.check",
     "InvariantWarning": "._simulate",
+    "AbstractAdjoint": ".adjoint",
+    "DiscreteAdjoint": ".adjoint",
+    "ImpactTimeAdjoint": ".adjoint",
 }
 _MODULES = ("scenes",)
 
@@ -99,4 +102,7 @@ __all__ = [
     "check_model",
     "Trajectory",
     "trajectory",
+    "AbstractAdjoint",
+    "DiscreteAdjoint",
+    "ImpactTimeAdjoint",
 ]
