@@ -1,6 +1,7 @@
 """The implicit derivative of a Newton solve (a custom JVP that the primal never
 evaluates) and the adjoint objects of a differentiable run."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -40,6 +41,9 @@ def root(strength, rhs=RHS, held=None):
     return solve(cubic, (strength, rhs), jnp.zeros(N), 50, held)
 
 
+root_x = jax.jit(lambda s: root(s).x)
+
+
 def equations(jaxpr) -> int:
     """Equations of a jaxpr and its sub-jaxprs, call wrappers not counted."""
     n = 0
@@ -64,7 +68,7 @@ def test_the_primal_is_newton_alone(held):
 
 def implicit(strength):
     """dx*/dstrength and dx*/drhs by the implicit function theorem."""
-    x = np.asarray(root(strength).x)
+    x = np.asarray(root_x(strength))
     J = np.asarray(A) + np.diag(3 * strength * x**2)
     return -np.linalg.solve(J, x**3), np.linalg.inv(J)
 
@@ -72,14 +76,19 @@ def implicit(strength):
 @pytest.mark.parametrize("held", [None, Factorisation.empty(N, jnp.float64)], ids=["newton", "modified"])
 def test_forward_and_reverse_give_the_implicit_derivative(held):
     d_strength, d_rhs = implicit(0.3)
-    fwd = jax.jit(jax.jacfwd(lambda s, b: root(s, b, held).x, argnums=(0, 1)))(0.3, RHS)
-    rev = jax.jit(jax.jacrev(lambda s, b: root(s, b, held).x, argnums=(0, 1)))(0.3, RHS)
+
+    @jax.jit
+    def derivatives(s, b):
+        fwd = jax.jacfwd(lambda s, b: root(s, b, held).x, argnums=(0, 1))(s, b)
+        rev = jax.jacrev(lambda s, b: root(s, b, held).x, argnums=(0, 1))(s, b)
+        return fwd, rev, jax.jacfwd(lambda s: root(s, b, held).aux)(s)
+
+    fwd, rev, aux = derivatives(0.3, RHS)
     for got in (fwd, rev):
         np.testing.assert_allclose(got[0], d_strength, rtol=1e-10)
         np.testing.assert_allclose(got[1], d_rhs, rtol=1e-10, atol=1e-14)
     # the aux follows x* and the parameters: d(s x³)/ds = x³ + 3 s x² dx/ds
-    x = np.asarray(root(0.3).x)
-    aux = jax.jit(jax.jacfwd(lambda s: root(s, held=held).aux))(0.3)
+    x = np.asarray(root_x(0.3))
     np.testing.assert_allclose(aux, x**3 + 0.9 * x**2 * d_strength, rtol=1e-10)
 
 
@@ -93,8 +102,8 @@ def test_vmap_of_grad_equals_a_loop_of_grads():
     grad = jax.jit(jax.grad(loss))
     for k, s in enumerate(strengths):
         np.testing.assert_allclose(batched[k], grad(s), rtol=1e-12)
-        x = np.asarray(root(float(s)).x)
-        np.testing.assert_allclose(batched[k], 2 * x @ implicit(float(s))[0], rtol=1e-10)
+        x = np.asarray(root_x(s))
+        np.testing.assert_allclose(batched[k], 2 * x @ implicit(s)[0], rtol=1e-10)
 
 
 def ball():
@@ -106,11 +115,11 @@ def test_an_adjoint_steps_the_scheme(adjoint):
     model, q0, v0 = ball()
     scheme = nj.DS()
     h = jnp.asarray(1e-3)
-    ops = scheme.prepare(model, h, jnp.asarray(0.0))
+    ops = eqx.filter_jit(scheme.prepare)(model, h, jnp.asarray(0.0))
     state = scheme.init(model, 0.0, q0, v0)
     extra = adjoint.init(model, q0)
-    new, out, extra_new = adjoint.step(scheme, model, ops, state, extra, h)
-    expected, expected_out = scheme.step(model, ops, state, h)
+    new, out, extra_new = eqx.filter_jit(adjoint.step)(scheme, model, ops, state, extra, h)
+    expected, expected_out = eqx.filter_jit(scheme.step)(model, ops, state, h)
     np.testing.assert_array_equal(new.q, expected.q)
     np.testing.assert_array_equal(out.v, expected_out.v)
     assert jax.tree_util.tree_structure(extra_new) == jax.tree_util.tree_structure(extra)
