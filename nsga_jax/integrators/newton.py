@@ -33,6 +33,12 @@ Newton's method, so the iteration is never worse than Newton's; at small
 steps, where the matrix changes little, most iterations are one residual and
 one pair of triangular solves. In a batch (``vmap``) the members refactor
 together, and only when one of them needs it (:func:`where_needed`).
+
+The schemes call :func:`solve`: :func:`newton` under a profile scope named for
+the sub-problem (Algorithm 1's smooth motion, position correction and
+velocity jump), with the implicit derivative of the converged solution as a
+custom JVP, so that every step is differentiable and a step that nobody
+differentiates is the Newton loop alone.
 """
 
 from __future__ import annotations
@@ -198,9 +204,9 @@ def solve(builder: Callable[..., Problem], args: tuple, x0: Any, max_iter: int,
     from ``factorisation`` when one is given: :func:`newton`, under the profile
     scope ``name``, with the implicit derivative of its converged solution.
 
-    ``builder`` must be a module-level function, and everything the problem
-    depends on must be in ``args`` (its arrays are what the derivative is
-    taken with respect to). The primal is :func:`newton` alone. Differentiated
+    ``builder`` must close over no arrays: everything the problem depends on
+    is in ``args`` (its floating-point arrays are what the derivative is taken
+    with respect to). The primal is :func:`newton` alone. Differentiated
     (``jax.jvp``, ``jax.grad``, ``jax.vmap`` of either), the solution x* of
     R(x, θ) = 0 (θ: the arrays of ``args``) has the tangent of the implicit
     function theorem,
@@ -214,11 +220,11 @@ def solve(builder: Callable[..., Problem], args: tuple, x0: Any, max_iter: int,
     The accuracy of dx follows the Newton tolerance, as x* does.
     """
     with jax.named_scope(name):
-        return _converged(builder, args, x0, factorisation, max_iter=max_iter)
+        return _implicit_newton(builder, args, x0, factorisation, max_iter=max_iter)
 
 
 @eqx.filter_custom_jvp
-def _converged(builder, args, x0, factorisation, *, max_iter):
+def _implicit_newton(builder, args, x0, factorisation, *, max_iter):
     return newton(builder(*args), x0, max_iter, factorisation)
 
 
@@ -226,11 +232,13 @@ def _is_none(x) -> bool:
     return x is None
 
 
-@_converged.def_jvp
-def _converged_jvp(primals, tangents, *, max_iter):
+@_implicit_newton.def_jvp
+def _implicit_newton_jvp(primals, tangents, *, max_iter):
+    """The converged solution and its tangent of the implicit function theorem
+    (see :func:`solve`), linear in the tangents of ``args`` and transposable."""
     builder, args, x0, factorisation = primals
     t_args = tangents[1]
-    sol = _converged(builder, args, x0, factorisation, max_iter=max_iter)
+    sol = _implicit_newton(builder, args, x0, factorisation, max_iter=max_iter)
     no_tangent = jax.tree_util.tree_map(_is_none, t_args, is_leaf=_is_none)
     nondiff, diff = eqx.partition(args, no_tangent, is_leaf=_is_none)
 
