@@ -53,6 +53,9 @@ _LAZY = {
     "Tolerances": ".monitors",
     "check_model": ".models.check",
     "InvariantWarning": "._simulate",
+    "AbstractAdjoint": ".adjoint",
+    "DiscreteAdjoint": ".adjoint",
+    "ImpactTimeAdjoint": ".adjoint",
 }
 _MODULES = ("scenes",)
 
@@ -102,4 +105,7 @@ __all__ = [
     "check_model",
     "Trajectory",
     "trajectory",
+    "AbstractAdjoint",
+    "DiscreteAdjoint",
+    "ImpactTimeAdjoint",
 ]

@@ -7,7 +7,9 @@ model, the scheme's settings and the initial state: ``jit``, ``vmap``,
 
 - Each Newton sub-problem is differentiated implicitly (implicit function
   theorem at the converged solution, active set frozen), never by unrolling
-  its iterations: :func:`nsga_jax.integrators.newton.solve`.
+  its iterations: a custom JVP of :func:`nsga_jax.integrators.newton.solve`
+  that a run nobody differentiates never evaluates. ``adjoint=`` chooses
+  which derivative each step carries (:mod:`nsga_jax.adjoint`).
 - The step loop is a ``lax.scan`` over chunks of steps with ``jax.checkpoint``
   on each chunk: reverse mode stores one state per chunk and recomputes a
   chunk during the backward pass, keeping that chunk's per-step residuals,
@@ -24,7 +26,6 @@ model, the scheme's settings and the initial state: ``jit``, ``vmap``,
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any
@@ -35,14 +36,13 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._custom_types import Scalar
-from .events import initially_active, with_impact_time_sensitivity
+from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
 from .integrators.base import AbstractScheme, StepState
 from .integrators.records import StepOutput
 from .models.base import Model
 from .results import RESULTS, ConfigError, from_code
 from .validation import check_model_fields, check_scheme, describe, integer, require_instance
 
-ADJOINTS = ("discrete", "event")
 MAX_SCAN_STEPS = 2**31 - 1
 """The most steps of one differentiable trajectory (its scan counts steps in int32;
 every step's record is kept, so longer runs would not fit in memory anyway)."""
@@ -94,7 +94,7 @@ def trajectory(
     observe: Callable[[StepState, StepOutput], Any] | None = None,
     throw: bool = True,
     checkpoint_steps: bool | None = None,
-    adjoint: str = "discrete",
+    adjoint: AbstractAdjoint = DiscreteAdjoint(),
 ) -> Trajectory:
     """Integrate ``n_steps`` steps of size ``h`` from (t0, q0, v0), differentiably.
 
@@ -114,11 +114,13 @@ def trajectory(
         checkpoint_steps: checkpoint each step inside a chunk as well (see
             above; default: only where a chunk's dense residuals would pass
             256 MiB).
-        adjoint: ``"discrete"``: the exact derivative of the time-stepping map
-            (impacts held at their steps); ``"event"``: at each step where a
-            contact closes, the derivative of a continuous-time rebuild of the
-            step, which sees the impact instant move
-            (:mod:`nsga_jax.events`). Values are the same in both modes.
+        adjoint: which derivative the steps carry (:mod:`nsga_jax.adjoint`):
+            :class:`~nsga_jax.DiscreteAdjoint` (default), the exact derivative
+            of the time-stepping map (impacts held at their steps), or
+            :class:`~nsga_jax.ImpactTimeAdjoint`, at each step where a contact
+            closes the derivative of a continuous-time rebuild of the step,
+            which sees the impact instant move (:mod:`nsga_jax.impact_time`).
+            Values are the same with both.
 
     Returns:
         A :class:`Trajectory`.
@@ -127,8 +129,7 @@ def trajectory(
     integer("n_steps", n_steps, 1, MAX_SCAN_STEPS)
     if checkpoint_every is not None:
         integer("checkpoint_every", checkpoint_every, 1)
-    if adjoint not in ADJOINTS:
-        raise ConfigError(f"adjoint must be one of {', '.join(map(repr, ADJOINTS))}, got {adjoint!r}")
+    require_instance("adjoint", adjoint, AbstractAdjoint, ADJOINT_KINDS)
     require_instance("model", model, Model, "a model instance (a subclass of nsga_jax.Model)")
     check_model_fields(model)  # concrete fields only: traced ones are checked where they were made
     for name, x in (("q0", q0), ("v0", v0)):
@@ -136,8 +137,7 @@ def trajectory(
             raise TypeError(f"{name} must be an array of {model.n_dof} numbers, got {describe(x)}")
         if jnp.shape(x) != (model.n_dof,):
             raise ConfigError(f"{name} must have shape ({model.n_dof},), got {jnp.shape(x)}")
-    scheme = dataclasses.replace(scheme, differentiable=True)
-    scheme.bounds()  # schemes without an implicit adjoint refuse here
+    refuse_without_implicit_adjoint(scheme)
     dtype = jnp.result_type(float)
     t0 = jnp.asarray(t0, dtype)
     h = jnp.asarray(h, dtype)
@@ -155,18 +155,11 @@ def trajectory(
 
     padded = n_chunks * c != n_steps  # the last chunk runs past n_steps: mask those steps
 
-    event = adjoint == "event" and model.n_unilateral > 0
-    nb = model.n_bilateral
-
-    def one_step(carry, k):  # carry: the state, and with adjoint="event" the contacts' last active set
-        state, was_active = carry
+    def one_step(carry, k):  # carry: the state and what the adjoint carries (adjoint.init)
+        state, extra = carry
         state = eqx.tree_at(lambda s: s.t, state, t0 + k.astype(dtype) * h)  # t0 + k h, never accumulated
-        new, out = scheme.step(model, ops, state, h)
-        if event:
-            new, out = with_impact_time_sensitivity(model, ops, state, new, out, h, was_active)
-            new_carry = (new, out.active_velocity[nb:])
-        else:
-            new_carry = (new, was_active)
+        new, out, extra = adjoint.step(scheme, model, ops, state, extra, h)
+        new_carry = (new, extra)
         if padded:
             new_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new_carry, carry)
         kept = out if observe is None else (observe(new, out), out.result)
@@ -179,8 +172,7 @@ def trajectory(
     def chunk(state, ks):
         return lax.scan(one_step, state, ks)
 
-    active0 = initially_active(model, q0) if event else jnp.zeros((0,), bool)
-    _, outs = lax.scan(chunk, (state0, active0), jnp.arange(n_chunks * c).reshape(n_chunks, c))
+    _, outs = lax.scan(chunk, (state0, adjoint.init(model, q0)), jnp.arange(n_chunks * c).reshape(n_chunks, c))
     outs = jax.tree_util.tree_map(lambda x: x.reshape((n_chunks * c,) + x.shape[2:])[:n_steps], outs)
     if observe is None:
         records, result = outs, outs.result

@@ -16,6 +16,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import nsga_jax  # noqa: E402
+from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.scenes import parametrize  # noqa: E402
 
 H, N = 1e-3, 1500
@@ -26,7 +27,7 @@ def main() -> None:
 
     def loss(p, adjoint):
         model, q0, v0, observe = build(p)
-        traj = nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, H, N, q0, v0, adjoint=adjoint)
+        traj = nsga_jax.trajectory(model, nsga_jax.DS(), 0.0, H, N, q0, v0, adjoint=adjoint_named(adjoint))
         return jnp.mean(observe(traj)["tip_u"] ** 2)
 
     for adjoint in ("discrete", "event"):

@@ -326,9 +326,6 @@ class AbstractScheme(eqx.Module):
     Attributes:
         tol_r, tol_f: relative and reference tolerances of eq. 51.
         max_iter: iteration cap of each Newton loop (static).
-        differentiable: make each Newton solve differentiable by the implicit
-            function theorem (:func:`~nsga_jax.integrators.newton.solve`); set by
-            :func:`~nsga_jax.trajectory`. Static.
         fast_paths: use what the model's static structure makes constant
             (mass, tangents, constraint Jacobian, inverted iteration matrices),
             computed once per run; ``False`` is the generic path, for checks
@@ -338,7 +335,6 @@ class AbstractScheme(eqx.Module):
     tol_r: ScalarLike = eqx.field(default=1e-5, converter=as_float)
     tol_f: ScalarLike = eqx.field(default=1e-5, converter=as_float)
     max_iter: int = eqx.field(static=True, default=50)
-    differentiable: bool = eqx.field(static=True, default=False, kw_only=True)
     fast_paths: bool = eqx.field(static=True, default=True, kw_only=True)
 
     name = "abstract"

@@ -21,7 +21,7 @@ from jax import lax
 
 from .._custom_types import Scalar
 from ..models.base import Model
-from ..results import RESULTS, ConfigError, from_code
+from ..results import RESULTS, from_code
 from .base import (
     DIVERGENCE_FACTOR,
     Operators,
@@ -56,12 +56,6 @@ class CS(AbstractGenAlpha):
 
     name = "cs"
     subproblems = ("coupled",)
-
-    def bounds(self):
-        if self.differentiable:
-            raise ConfigError("CS is not differentiable here (its coupled iteration has no implicit adjoint); "
-                              "use DS, DSn or MJ for gradients")
-        return super().bounds()
 
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         co = self.coefficients
@@ -145,7 +139,8 @@ class CS(AbstractGenAlpha):
             converged, diverged = status(rs, floors)
             return ~converged & ~diverged & (it < self.max_iter)
 
-        carry = lax.while_loop(cond, sweep, (x0, r0, jnp.zeros(3, q_pred.dtype), jnp.zeros((), jnp.int32)))
+        with jax.named_scope("coupled"):
+            carry = lax.while_loop(cond, sweep, (x0, r0, jnp.zeros(3, q_pred.dtype), jnp.zeros((), jnp.int32)))
         (xs, xp, xv), (rs, rp, rv), floors, it = carry
         converged, diverged = status((rs, rp, rv), floors)
         result = RESULTS.where(converged, RESULTS.successful,

@@ -162,12 +162,11 @@ class DS(AbstractGenAlpha):
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
 
-        diff = self.differentiable
         held = state.factorisations or (None, None, None)
         # 1. smooth motion
         co = self.coefficients
         sol_s = solve(smooth_problem, (model, ops, co, tol, t, h, q_pred, v_pred),
-                      smooth_start(v_pred, model.n_bilateral), self.max_iter, diff, held[0])
+                      smooth_start(v_pred, model.n_bilateral), self.max_iter, held[0], name="smooth_motion")
         smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
         qt, vt, vd = smooth.q, smooth.v, smooth.vd
         if model.n_constraints == 0:  # nothing to project: U = W = 0 exactly
@@ -178,14 +177,14 @@ class DS(AbstractGenAlpha):
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
         sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces),
-                      projection_start(model, qt), self.max_iter, diff, held[1])
+                      projection_start(model, qt), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
-        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth, G_prev_v_prev,
-                                         self.nonsmooth_forces), projection_start(model, qt), self.max_iter, diff,
-                      held[2])
+        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth,
+                                         G_prev_v_prev, self.nonsmooth_forces),
+                      projection_start(model, qt), self.max_iter, held[2], name="velocity_jump")
         W, _ = sol_v.x
         velocity: VelocityAux = sol_v.aux
 

@@ -87,7 +87,7 @@ class MJ(AbstractScheme):
             restituted = restitution(model, q_n.dtype) * (constraint_jacobian(model, ops, q_n) @ v_n)
         args = (model, ops, tol, t, h, self.theta, q_n, v_n, f_n, candidates, restituted)
         x0 = (v_n, jnp.zeros((model.n_constraints,), q_n.dtype))
-        sol = solve(moreau_jean_problem, args, x0, self.max_iter, self.differentiable)
+        sol = solve(moreau_jean_problem, args, x0, self.max_iter, name="moreau_jean")
         v, _ = sol.x
         q = q_n + h * (self.theta * v + (1.0 - self.theta) * v_n)
         kwargs = {}

@@ -2,18 +2,17 @@
 
 A time-stepping scheme puts every impact on the step grid. Its exact
 derivative (what :func:`~nsga_jax.trajectory` returns with
-``adjoint="discrete"``) therefore holds each impact at its step while a
+``adjoint=DiscreteAdjoint()``) therefore holds each impact at its step while a
 parameter moves: it misses how the impact *instant* moves, which in continuous
 time changes the state after the impact by the saltation term
 ``-(F⁺ - J F⁻) δt*`` (F± the vector fields before and after, J the impact
 map's Jacobian, δt* = -δg / ġ⁻ the shift of the impact instant). On a bouncing
 ball that is half of the derivative, at every step size.
 
-With ``adjoint="event"`` each step where a contact closes (active in the
-step's velocity problem and not in the previous step's, approaching at t_n)
-gets the derivative of
-a continuous-time rebuild of that step, exact to first order in h, while its
-value stays the scheme's:
+With :class:`~nsga_jax.ImpactTimeAdjoint` each step where a contact closes
+(active in the step's velocity problem and not in the previous step's,
+approaching at t_n) gets the derivative of a continuous-time rebuild of that
+step, exact to first order in h, while its value stays the scheme's:
 
 1. the impact instant t_n + τ is the first root (in [-h, h]) of a closing
    contact's gap along the smooth motion ``q(s) = q_n + s v_n + s²/2 a_n``
