@@ -133,12 +133,12 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
-    GB_smooth = (ops.constraints.bilateral(model, smooth.q)
-                 if (with_forces and nb and not ops.constraints.is_constant) else None)
+    curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
+    GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
     def f_p(q, G):
         fp = ops.force.change(model, f_smooth, q, smooth.v, t)
-        if GB_smooth is not None:
+        if curved_joints:
             fp = fp + (G[:nb] - GB_smooth).T @ smooth.lam  # (g_q^T - g̃_q^T) λ̃, eq. 29
         return fp
 
