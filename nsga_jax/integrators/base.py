@@ -21,7 +21,7 @@ from .._util import as_float
 from ..models.base import Model
 from ..results import Result
 from .newton import NewtonResult
-from .operators import Operators
+from .operators import MatrixKinds, Operators
 
 # --------------------------------------------------------------------------- data
 
@@ -206,8 +206,16 @@ class AbstractScheme(eqx.Module):
         return cast(jax.Array, self.tol_r), cast(jax.Array, self.tol_f), self.max_iter
 
     @abc.abstractmethod
+    def matrix_kinds(self, model: Model) -> MatrixKinds:
+        """The kinds of the smooth, position and velocity iteration matrices
+        :meth:`prepare` builds for ``model`` (static: nothing is evaluated;
+        :mod:`~nsga_jax.integrators.iteration_matrix`)."""
+
+    @abc.abstractmethod
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
-        """Constant operators for this model and step size (run once, outside the loop)."""
+        """The operators for this model and step size: the model's terms and
+        the iteration matrices, what is constant computed here (run once,
+        outside the loop; :mod:`~nsga_jax.integrators.operators`)."""
 
     @abc.abstractmethod
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
