@@ -33,8 +33,9 @@ import jax.numpy as jnp
 
 from ._custom_types import Scalar, Vector
 from .impact_time import initially_active, with_impact_time_sensitivity
-from .integrators.base import AbstractScheme, Operators, StepState
+from .integrators.base import AbstractScheme, StepState
 from .integrators.cs import CS
+from .integrators.operators import Operators
 from .integrators.records import StepOutput
 from .models.base import Model
 from .results import ConfigError

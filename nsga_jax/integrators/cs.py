@@ -23,14 +23,12 @@ from .._custom_types import Scalar
 from ..models.base import Model
 from ..results import RESULTS, from_code
 from .base import (
-    DIVERGENCE_FACTOR,
-    Operators,
     StepState,
-    constant_operators,
-    constraint_jacobian,
 )
 from .ds import DS, AbstractGenAlpha
+from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, PositionAux, StepOutput, SubproblemRecord, VelocityAux, make_output
+from .residuals import DIVERGENCE_FACTOR
 from .subproblems import (
     position_problem,
     projection_start,
@@ -60,15 +58,16 @@ class CS(AbstractGenAlpha):
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         co = self.coefficients
         c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
-        return constant_operators(
-            model, t0,
-            smooth=lambda M, K, C: c_vd * M + C + c_q * K,
-            position=lambda M, K, C: M,
-            velocity=lambda M, K, C: M,
-            smooth_needs_constant_G=True,
-            position_needs_constant_G=True,
+        return prepare_operators(
+            model, t0, self.matrix_kinds(model),
+            (lambda M, K, C: c_vd * M + C + c_q * K, lambda M, K, C: M, lambda M, K, C: M),
             enabled=self.fast_paths,
         )
+
+    def matrix_kinds(self, model: Model) -> MatrixKinds:
+        """Constant for a constant mass and a linear force (the smooth and
+        position matrices only with affine constraints), else refactored."""
+        return matrix_kinds(model, needs_constant_G=(True, True, False), enabled=self.fast_paths)
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
         if model.n_constraints == 0:  # no jumps: CS and DS coincide, the coupled iteration is the smooth one
@@ -83,7 +82,7 @@ class CS(AbstractGenAlpha):
         co = self.coefficients
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
-        G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
+        G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
 
         def smooth_res(xs, xp, xv):
             return smooth_problem(model, ops, co, tol, t, h, q_pred, v_pred, offset=(xp[0], xv[0]))

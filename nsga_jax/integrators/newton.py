@@ -7,8 +7,10 @@ Each sub-problem of a step is a :class:`Problem` of three pure functions:
     (51) ``tol_r (sum_k ||r_k|| + tol_f)`` built from its terms r_k, and an
     ``aux`` pytree (active set, multipliers...) handed to the two others;
 ``linearise(x, residual) -> J``
-    the iteration matrix at x, factored (the expensive part: tangents and an
-    LU factorisation), or ``None`` where it is a precomputed constant;
+    the iteration matrix at x, ready to solve with: a fresh LU factorisation
+    (the expensive part: tangents and the factorisation), or the precomputed
+    matrix itself where it is constant
+    (:mod:`~nsga_jax.integrators.iteration_matrix`);
 ``correct(x, residual, J) -> (dx, floor)``
     the Newton correction solved with J, and the round-off floor of the
     residual at that iterate.
