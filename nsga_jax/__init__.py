@@ -54,6 +54,9 @@ _LAZY = {
     "Tolerances": ".monitors",
     "check_model": ".models.check",
     "InvariantWarning": "._simulate",
+    "AbstractAdjoint": ".adjoint",
+    "DiscreteAdjoint": ".adjoint",
+    "ImpactTimeAdjoint": ".adjoint",
 }
 _MODULES = ("scenes",)
 
@@ -104,4 +107,7 @@ __all__ = [
     "load_scene",
     "Tolerances",
     "check_model",
+    "AbstractAdjoint",
+    "DiscreteAdjoint",
+    "ImpactTimeAdjoint",
 ]

@@ -8,7 +8,9 @@ returns the same :class:`Solution` type.
 
 - Each Newton sub-problem is differentiated implicitly (implicit function
   theorem at the converged solution, active set frozen), never by unrolling
-  its iterations: :func:`nsga_jax.integrators.newton.solve`.
+  its iterations: a custom JVP of :func:`nsga_jax.integrators.newton.solve`
+  that a run nobody differentiates never evaluates. ``adjoint=`` chooses
+  which derivative each step carries (:mod:`nsga_jax.adjoint`).
 - The step loop is a ``lax.scan`` over chunks of steps with ``jax.checkpoint``
   on each chunk: reverse mode stores one state per chunk and recomputes a
   chunk during the backward pass, keeping that chunk's per-step residuals,
@@ -25,7 +27,6 @@ returns the same :class:`Solution` type.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
@@ -35,8 +36,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .events import initially_active, with_impact_time_sensitivity
-from .integrators.base import AbstractScheme, Operators, StepState
+from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
+from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template
 from .models.base import Model
 from .results import RESULTS, ConfigError, from_code
@@ -44,50 +45,11 @@ from .saveat import HOST_ONLY, SaveAt, refuse
 from .solution import Solution, first_failed_code, traced_stats
 from .validation import check_model_fields, check_scheme, describe, integer, require_instance, time_grid
 
-ADJOINTS = ("discrete", "event")
 MAX_SCAN_STEPS = 2**31 - 1
 """The most steps of one pure run (its scan counts steps in int32; every
 step's record is kept until ``SaveAt`` picks the rows, so longer runs would
 not fit in memory anyway)."""
 STEP_RESIDUALS_BYTES = 2**28  # per chunk: above this, each step is checkpointed as well
-
-
-# ------------------------------------------------------------ adjoints
-# ``init(model, q0) -> extra`` and ``step(scheme, model, ops, state, extra, h)
-# -> (new_state, record, new_extra)``: how a step is differentiated.
-
-
-class _DiscreteAdjoint(eqx.Module):
-    """The exact derivative of the time-stepping map (impacts held at their steps)."""
-
-    def init(self, model: Model, q0: jax.Array) -> jax.Array:
-        return jnp.zeros((0,), bool)
-
-    def step(self, scheme: AbstractScheme, model: Model, ops: Operators, state: StepState, extra: jax.Array,
-             h: jax.Array) -> tuple[StepState, StepOutput, jax.Array]:
-        new, out = scheme.step(model, ops, state, h)
-        return new, out, extra
-
-
-class _EventAdjoint(eqx.Module):
-    """At each step where a contact closes, the derivative of a continuous-time
-    rebuild of the step, which sees the impact instant move
-    (:mod:`nsga_jax.events`); ``extra``: the contacts' last active set (nu,)."""
-
-    def init(self, model: Model, q0: jax.Array) -> jax.Array:
-        return initially_active(model, q0)
-
-    def step(self, scheme: AbstractScheme, model: Model, ops: Operators, state: StepState, extra: jax.Array,
-             h: jax.Array) -> tuple[StepState, StepOutput, jax.Array]:
-        new, out = scheme.step(model, ops, state, h)
-        new, out = with_impact_time_sensitivity(model, ops, state, new, out, h, extra)
-        return new, out, out.active_velocity[model.n_bilateral:]
-
-
-def _adjoint(adjoint: str, model: Model) -> _DiscreteAdjoint | _EventAdjoint:
-    if adjoint not in ADJOINTS:
-        raise ConfigError(f"adjoint must be one of {', '.join(map(repr, ADJOINTS))}, got {adjoint!r}")
-    return _EventAdjoint() if adjoint == "event" and model.n_unilateral > 0 else _DiscreteAdjoint()
 
 
 # ------------------------------------------------------------ the step count
@@ -137,7 +99,7 @@ def integrate(
     *,
     n_steps: int | None = None,
     saveat: SaveAt = SaveAt(),
-    adjoint: str = "discrete",
+    adjoint: AbstractAdjoint = DiscreteAdjoint(),
     throw: bool = True,
     checkpoint_every: int | None = None,
     checkpoint_steps: bool | None = None,
@@ -156,11 +118,13 @@ def integrate(
         saveat: what to keep (:class:`~nsga_jax.SaveAt`): every k-th row, or
             a function of each row's state and record. ``SaveAt.chunks``
             needs the host driver and is refused here.
-        adjoint: ``"discrete"``: the exact derivative of the time-stepping map
-            (impacts held at their steps); ``"event"``: at each step where a
-            contact closes, the derivative of a continuous-time rebuild of the
-            step, which sees the impact instant move
-            (:mod:`nsga_jax.events`). Values are the same in both modes.
+        adjoint: which derivative the steps carry (:mod:`nsga_jax.adjoint`):
+            :class:`~nsga_jax.DiscreteAdjoint` (default), the exact derivative
+            of the time-stepping map (impacts held at their steps), or
+            :class:`~nsga_jax.ImpactTimeAdjoint`, at each step where a contact
+            closes the derivative of a continuous-time rebuild of the step,
+            which sees the impact instant move (:mod:`nsga_jax.impact_time`).
+            Values are the same with both.
         throw: raise at run time (``eqx.error_if``) if any step fails; with
             ``False`` failures are in ``result``, ``stats["failed_steps"]``
             and (full records) ``records.result``.
@@ -181,16 +145,15 @@ def integrate(
     n_steps = _step_count(t0, t1, h, n_steps)
     if checkpoint_every is not None:
         integer("checkpoint_every", checkpoint_every, 1)
+    require_instance("adjoint", adjoint, AbstractAdjoint, ADJOINT_KINDS)
     require_instance("model", model, Model, "a model instance (a subclass of nsga_jax.Model)")
-    step = _adjoint(adjoint, model)
     check_model_fields(model)  # concrete fields only: traced ones are checked where they were made
     for name, x in (("q0", q0), ("v0", v0)):
         if isinstance(x, (str, bytes)) or x is None:
             raise TypeError(f"{name} must be an array of {model.n_dof} numbers, got {describe(x)}")
         if np.shape(x) != (model.n_dof,):  # numpy's shape: lists too, and tracers by their .shape
             raise ConfigError(f"{name} must have shape ({model.n_dof},), got {np.shape(x)}")
-    scheme = dataclasses.replace(scheme, differentiable=True)
-    scheme.bounds()  # schemes without an implicit adjoint refuse here
+    refuse_without_implicit_adjoint(scheme)
     dtype = jnp.result_type(float)
     t0 = jnp.asarray(t0, dtype)
     h = jnp.asarray(h, dtype)
@@ -212,7 +175,7 @@ def integrate(
     def one_step(carry, k):  # carry: the state and the adjoint's extra
         state, extra = carry
         state = eqx.tree_at(lambda s: s.t, state, t0 + k.astype(dtype) * h)  # t0 + k h, never accumulated
-        new, out, extra = step.step(scheme, model, ops, state, extra, h)
+        new, out, extra = adjoint.step(scheme, model, ops, state, extra, h)
         new_carry = (new, extra)
         if padded:
             new_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new_carry, carry)
@@ -228,7 +191,7 @@ def integrate(
     def chunk(carry, ks):
         return lax.scan(one_step, carry, ks)
 
-    _, outs = lax.scan(chunk, (state0, step.init(model, q0)), jnp.arange(n_chunks * c).reshape(n_chunks, c))
+    _, outs = lax.scan(chunk, (state0, adjoint.init(model, q0)), jnp.arange(n_chunks * c).reshape(n_chunks, c))
     outs = jax.tree_util.tree_map(lambda x: x.reshape((n_chunks * c,) + x.shape[2:])[:n_steps], outs)
     first = _initial_record(model, scheme.subproblems, t0, q0, v0, dtype)
     if fn is None:

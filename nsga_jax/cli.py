@@ -211,6 +211,7 @@ def _identify(args) -> int:
                               f"{', '.join(scene.spec.observables)}")
     out = writable_folder(args.out or Path("nsga_out") / f"{scene.name}_identify")
     _use_cache(args)
+    from .adjoint import adjoint_named
     from .identify import Data, identify, synthetic_data, write_identification
 
     if args.synthetic:
@@ -231,7 +232,7 @@ def _identify(args) -> int:
     print(f"identifying {', '.join(names)} with {args.optimizer} ({args.adjoint} gradients) ...", file=sys.stderr)
     result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
                       progress=True, max_steps=args.max_steps, learning_rate=args.learning_rate, true=true,
-                      adjoint=args.adjoint)
+                      adjoint=adjoint_named(args.adjoint))
     paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}", scene=scene)
     for k in names:
         line = f"{k}: initial {result.initial[k]:.6g} -> recovered {result.recovered[k]:.6g}"

@@ -3,23 +3,22 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import numpy as np
 
-from .integrators.base import Operators, StepState
+from .integrators.base import StepState
+from .integrators.operators import Operators
 
 FLOAT32_HINT = (
     "The run is in float32 (eps = 1.2e-7): if the residual is within a few hundred eps of the size of "
     "its terms, the limit is the precision; rerun in float64."
 )
-OPERATOR_NAMES = {
-    "M": "the mass matrix", "K": "the stiffness matrix", "C": "the damping matrix",
-    "G": "the constraint Jacobian",
-    "smooth_inv": "the inverted iteration matrix of the smooth motion sub-problem",
-    "position_inv": "the inverted iteration matrix of the position correction",
-    "velocity_inv": "the inverted iteration matrix of the velocity jump",
+TERM_NAMES = {"M": "the mass matrix", "K": "the stiffness matrix", "C": "the damping matrix",
+              "G": "the constraint Jacobian"}
+MATRIX_NAMES = {
+    "smooth": "the inverted iteration matrix of the smooth motion sub-problem",
+    "position": "the inverted iteration matrix of the position correction",
+    "velocity": "the inverted iteration matrix of the velocity jump",
 }
 
 
@@ -34,8 +33,10 @@ def nonfinite_origin(ops: Operators, initial: StepState) -> str:
     def finite(tree) -> bool:
         return all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree_util.tree_leaves(tree))
 
-    bad = [OPERATOR_NAMES[f.name] for f in dataclasses.fields(ops)
-           if f.name in OPERATOR_NAMES and getattr(ops, f.name) is not None and not finite(getattr(ops, f.name))]
+    terms = (ops.mass, ops.force, ops.constraints)
+    bad = [name for term in terms for field, name in TERM_NAMES.items()
+           if not finite(getattr(term, field, None))]
+    bad += [name for sub, name in MATRIX_NAMES.items() if not finite(getattr(ops, sub))]
     causes = []
     if bad:
         listed = bad[0] if len(bad) == 1 else ", ".join(bad[:-1]) + " and " + bad[-1]
@@ -44,5 +45,3 @@ def nonfinite_origin(ops: Operators, initial: StepState) -> str:
     if not finite(initial.vd):
         causes.append("the initial acceleration is not finite (M(q0) singular, or f(q0, v0, t0) not finite)")
     return ("Before the first step, " + "; ".join(causes) + ".") if causes else ""
-
-

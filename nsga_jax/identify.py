@@ -3,7 +3,7 @@ descent through simulations with impacts (optax).
 
 The loss is the mean squared mismatch between the scene's observables and the
 data, each observable normalised by the mean square of its data; it is
-differentiated through the whole trajectory (:func:`~nsga_jax.trajectory`).
+differentiated through the whole trajectory (:func:`~nsga_jax.integrate`).
 The optimiser works on the parameters divided by their starting values (all
 of order one) and keeps them inside their allowed ranges.
 """
@@ -23,10 +23,12 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ._integrate import ADJOINTS, integrate
+from ._integrate import integrate
+from .adjoint import ADJOINT_KINDS, AbstractAdjoint, ImpactTimeAdjoint
 from .data import Data
 from .results import ConfigError
 from .scenes.base import load_scene, make_scheme, parametrize
+from .validation import require_instance
 
 OPTIMIZERS = ("lbfgs", "adam")
 
@@ -117,7 +119,7 @@ def identify(
     ftol: float = 1e-10,
     true: dict[str, float] | None = None,
     progress: bool = False,
-    adjoint: str = "event",
+    adjoint: AbstractAdjoint = ImpactTimeAdjoint(),
 ) -> Identification:
     """Fit the parameters ``names`` of a scene to ``data``.
 
@@ -135,9 +137,10 @@ def identify(
             iteration lowers the loss by less than ftol times its value.
         true: the true values, when known (synthetic data), for the report.
         progress: print the loss and the parameters after each iteration (stderr).
-        adjoint: ``"event"`` (default: gradients that see impact instants move,
-            :mod:`nsga_jax.events`) or ``"discrete"`` (the time-stepping map's
-            own derivative); see :func:`~nsga_jax.trajectory`.
+        adjoint: :class:`~nsga_jax.ImpactTimeAdjoint` (default: gradients that
+            see impact instants move, :mod:`nsga_jax.impact_time`) or
+            :class:`~nsga_jax.DiscreteAdjoint` (the time-stepping map's own
+            derivative); see :mod:`nsga_jax.adjoint`.
 
     One function is compiled: the loss, its gradient (through the whole
     trajectory) and the predicted observables, together; every evaluation,
@@ -147,8 +150,7 @@ def identify(
         raise ConfigError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got {optimizer!r}")
     if max_steps < 1:
         raise ConfigError(f"max_steps must be an integer >= 1, got {max_steps}")
-    if adjoint not in ADJOINTS:
-        raise ConfigError(f"adjoint must be one of {', '.join(map(repr, ADJOINTS))}, got {adjoint!r}")
+    require_instance("adjoint", adjoint, AbstractAdjoint, ADJOINT_KINDS)
     data.check()
     overrides = dict(overrides or {})
     start = {**overrides, **(initial or {})}

@@ -17,6 +17,15 @@ def test_built_in_models_keep_their_declarations(name):
     assert ("constant_mass" in checked) == scene.model.constant_mass
 
 
+def test_the_worked_example_model_keeps_its_declarations():
+    """The user model of docs/own-model.md (the double pendulum) as well."""
+    from pathlib import Path
+
+    scene = load_scene(Path(__file__).resolve().parents[1] / "docs/examples/double_pendulum.py")
+    checked = nj.check_model(scene.model, scene.q0, scene.v0)
+    assert {"sizes", "mass_product", "tangents", "constant_mass"} <= set(checked)
+
+
 PENDULUM = dict(m=1.0, length=1.0, gravity=9.81, wall_x=-0.5, side=1.0, e=0.5)
 
 

@@ -1,4 +1,4 @@
-"""Event-aware gradients (``integrate(..., adjoint="event")``) against the exact
+"""Event-aware gradients (``integrate(..., adjoint=ImpactTimeAdjoint())``) against the exact
 continuous-time derivatives: the bouncing ball (closed form) and the rigid
 pendulum against a wall (event-driven reference, diffrax)."""
 
@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
+from nsga_jax.adjoint import adjoint_named
 from nsga_jax.exact import bouncing_ball, rigid_pendulum
 from nsga_jax.scenes import parametrize
 
 G = 9.81
+EVENT, DISCRETE = nj.ImpactTimeAdjoint(), nj.DiscreteAdjoint()
 
 
 def loss_fn(scene, overrides, names, observable, t_data, y_data, n_steps, adjoint, scheme=None):
@@ -57,19 +59,19 @@ def as_array(g):
 
 def test_ball_event_gradient_converges_to_the_exact_derivative():
     exact = ball_exact_gradient()
-    params, loss = loss_fn("bouncing_ball", BALL, ["e", "height"], "z", BALL_T, BALL_DATA, 15000, "event")
+    params, loss = loss_fn("bouncing_ball", BALL, ["e", "height"], "z", BALL_T, BALL_DATA, 15000, EVENT)
     grad = jax.jit(jax.grad(loss))
     errors = np.array([np.abs(as_array(grad(params, h)) / exact - 1.0) for h in (1e-3, 3e-4, 1e-4)])
     assert np.all(errors[0] < 0.05), errors
     assert np.all(errors[-1] < errors[0]) and np.all(errors[-1] < 0.01), errors
     # the discrete map's own derivative misses the impact instants' motion: all of dL/dh0
-    _, discrete = loss_fn("bouncing_ball", BALL, ["e", "height"], "z", BALL_T, BALL_DATA, 1500, "discrete")
+    _, discrete = loss_fn("bouncing_ball", BALL, ["e", "height"], "z", BALL_T, BALL_DATA, 1500, DISCRETE)
     g = as_array(jax.grad(discrete)(params, 1e-3))
     assert abs(g[1]) < 0.05 * abs(exact[1]) and abs(g[0] / exact[0] - 1.0) > 0.1
 
 
 def test_event_gradient_forward_equals_reverse():
-    params, loss = loss_fn("bouncing_ball", BALL, ["e"], "z", BALL_T, BALL_DATA, 1500, "event")
+    params, loss = loss_fn("bouncing_ball", BALL, ["e"], "z", BALL_T, BALL_DATA, 1500, EVENT)
     reverse = float(jax.grad(loss)(params, 1e-3)["e"])
     forward = jax.jvp(lambda e: loss({"e": e}, 1e-3), (params["e"],), (jnp.ones(()),))[1]
     assert float(forward) == pytest.approx(reverse, rel=1e-10)
@@ -79,14 +81,14 @@ def test_event_gradient_forward_equals_reverse():
 def test_other_schemes_event_gradient(scheme):
     # Moreau-Jean detects an impact after the gap went negative: the impact instant is then
     # a root before t_n, and the rebuild still gives the continuous derivative.
-    params, loss = loss_fn("bouncing_ball", BALL, ["e", "height"], "z", BALL_T, BALL_DATA, 1500, "event", scheme)
+    params, loss = loss_fn("bouncing_ball", BALL, ["e", "height"], "z", BALL_T, BALL_DATA, 1500, EVENT, scheme)
     np.testing.assert_allclose(as_array(jax.grad(loss)(params, 1e-3)), ball_exact_gradient(), rtol=0.05)
 
 
 def test_away_from_impacts_both_adjoints_agree():
     t = np.arange(0.0, 0.4 + 1e-12, 0.01)  # the first impact is at 0.45 s
     grads = []
-    for adjoint in ("discrete", "event"):
+    for adjoint in (nj.DiscreteAdjoint(), EVENT):
         params, loss = loss_fn("bouncing_ball", {**BALL, "velocity": 0.3}, ["height", "velocity"], "z", t,
                                np.zeros_like(t), 400, adjoint)
         grads.append(jax.grad(loss)(params, 1e-3))
@@ -110,12 +112,22 @@ def test_pendulum_event_gradient_in_wall_position():
     wall = -0.28
     exact = central(lambda w: float(np.mean((pendulum_x(w) - data) ** 2)), wall, 1e-5)
     params, loss = loss_fn("rigid_pendulum", {"wall_x": wall, "e": 0.7}, ["wall_x"], "x", PEND_T, data, 1000,
-                           "event")
+                           EVENT)
     grad = float(jax.grad(loss)(params, 1e-3)["wall_x"])
     assert grad == pytest.approx(exact, rel=0.05)
 
 
 def test_unknown_adjoint_is_refused():
+    # the command line's names of the adjoints
     with pytest.raises(nj.ConfigError, match=r"adjoint must be one of 'discrete', 'event'"):
+        adjoint_named("saltation")
+    assert isinstance(adjoint_named("event"), nj.ImpactTimeAdjoint)
+
+
+@pytest.mark.parametrize("given, shown", [("event", "str 'event'"),
+                                          (nj.ImpactTimeAdjoint, "the class ImpactTimeAdjoint")])
+def test_adjoint_must_be_an_instance(given, shown):
+    with pytest.raises(TypeError, match=rf"adjoint must be an adjoint instance: nsga_jax.DiscreteAdjoint\(\) "
+                                        rf"or nsga_jax.ImpactTimeAdjoint\(\), got {shown}"):
         nj.integrate(nj.BouncingBall(m=1.0, gravity=G, e=0.5), nj.DS(), 0.0, 0.01, 1e-3, jnp.ones(1),
-                     jnp.zeros(1), adjoint="saltation")
+                     jnp.zeros(1), adjoint=given)

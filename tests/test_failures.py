@@ -89,17 +89,23 @@ def test_a_failure_after_a_finite_start_gets_no_singular_matrix_hint():
 
 
 def test_a_singular_block_of_the_tridiagonal_elimination_is_named():
+    import dataclasses
+
     from nsga_jax._simulate import nonfinite_origin
-    from nsga_jax.integrators.base import Operators, StepState
+    from nsga_jax.integrators.base import StepState
+    from nsga_jax.integrators.iteration_matrix import ConstantTridiagonal
     from nsga_jax.integrators.linalg import Tridiagonal
+    from nsga_jax.integrators.operators import generic_operators
 
     n = 11
     band = jnp.stack([jnp.full(n, -1.0), jnp.full(n, 2.0), jnp.full(n, -1.0)])
     singular = Tridiagonal.of(band.at[:, :4].set(0.0))  # the first block is all zero
     assert not np.all(np.isfinite(np.asarray(singular.blocks_inv)))
-    nothing = dict.fromkeys(f for f in Operators.__dataclass_fields__)
+    nothing = generic_operators()  # no constant operator
+    zero = jnp.zeros(())
     state = StepState(t=jnp.zeros(()), q=jnp.zeros(n), v=jnp.zeros(n), vd=jnp.zeros(n), a=jnp.zeros(n))
-    assert nonfinite_origin(Operators(**nothing), state) == ""
-    hint = nonfinite_origin(Operators(**{**nothing, "position_inv": singular}), state)
+    assert nonfinite_origin(nothing, state) == ""
+    position = ConstantTridiagonal(elimination=singular, inverse_Gt=None, K_norm=zero, C_norm=zero)
+    hint = nonfinite_origin(dataclasses.replace(nothing, position=position), state)
     assert "inverted iteration matrix of the position correction" in hint and "singular" in hint
     assert "initial acceleration" not in hint

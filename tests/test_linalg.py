@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from nsga_jax.integrators.linalg import Factorisation, dense_solve, inverse_solve, solve_bordered
+from nsga_jax.integrators.iteration_matrix import ConstantInverse
+from nsga_jax.integrators.linalg import Factorisation, solve_bordered
 
 
 def full_matrix(A, Gu, Gl, a, k, p):
@@ -29,11 +30,13 @@ def test_schur_solve_equals_full_bordered_solve(mask, symmetric):
     k, p = 2.5, 1.7
     r1, r2 = rng.normal(size=n), rng.normal(size=m)
     expected = np.linalg.solve(full_matrix(A, Gu, Gl, a, k, p), -np.concatenate([r1, r2]))
-    lu = Factorisation.of(jnp.asarray(A), jnp.zeros(()), jnp.zeros(()))
-    for solve, pre in ((dense_solve(jnp.asarray(A)), None), (lu.solve, None),
-                       (inverse_solve(jnp.asarray(np.linalg.inv(A))), jnp.asarray(np.linalg.solve(A, Gu.T)))):
-        dx, dmu = solve_bordered(solve, jnp.asarray(r1), jnp.asarray(r2), jnp.asarray(Gu), jnp.asarray(Gl),
-                                 jnp.asarray(a), k, p, pre)
+    zero = jnp.zeros(())
+    lu = Factorisation.of(jnp.asarray(A), zero, zero)
+    # LU factors; a constant inverse without, and with its precomputed A^{-1} Gu^T
+    for matrix in (lu, ConstantInverse.of(jnp.asarray(A), None, zero, zero),
+                   ConstantInverse.of(jnp.asarray(A), jnp.asarray(Gu), zero, zero)):
+        dx, dmu = solve_bordered(matrix, jnp.asarray(r1), jnp.asarray(r2), jnp.asarray(Gu), jnp.asarray(Gl),
+                                 jnp.asarray(a), k, p)
         np.testing.assert_allclose(np.concatenate([dx, dmu]), expected, rtol=1e-10, atol=1e-12)
 
 
@@ -58,7 +61,7 @@ def test_tridiagonal_solve_equals_the_dense_solve(n):
     rng = np.random.default_rng(n)
     A = rng.normal(size=(n, n)) + 4.0 * np.eye(n)  # non-symmetric, diagonally dominant
     A[np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > 1] = 0.0
-    solve = jax.jit(lambda b, rhs: inverse_solve(Tridiagonal.of(b))(rhs))
+    solve = jax.jit(lambda b, rhs: Tridiagonal.of(b).solve(rhs))
     band = band_matrix(jnp.asarray(A), 1)
     x, X = rng.normal(size=n), rng.normal(size=(n, 2))
     np.testing.assert_allclose(solve(band, jnp.asarray(x)), np.linalg.solve(A, x), rtol=1e-12, atol=1e-13)
@@ -86,16 +89,16 @@ def test_tridiagonal_solve_of_a_stiff_chain_matches_lapack_accuracy():
 def test_the_bar_solves_its_constant_matrices_by_tridiagonal_elimination():
     import equinox as eqx
 
-    from nsga_jax.integrators.linalg import Tridiagonal
+    from nsga_jax.integrators.iteration_matrix import ConstantTridiagonal
     from nsga_jax.scenes import load_scene
 
     scene = load_scene("impacting_bar")
     ops = eqx.filter_jit(lambda h: scene.scheme().prepare(scene.model, h, 0.0))(1e-3)
-    for inverse in (ops.smooth_inv, ops.position_inv, ops.velocity_inv):
-        assert isinstance(inverse, Tridiagonal) and inverse.n == scene.model.n_dof
-    G = np.asarray(ops.G)
-    A = np.asarray(ops.M) + 1e-6 * np.asarray(ops.K)  # DS's position matrix M + h² K
-    np.testing.assert_allclose(ops.position_inv_Gt, np.linalg.solve(A, G.T), rtol=1e-10,
+    for matrix in (ops.smooth, ops.position, ops.velocity):
+        assert isinstance(matrix, ConstantTridiagonal) and matrix.elimination.n == scene.model.n_dof
+    G = np.asarray(ops.constraints.G)
+    A = np.asarray(ops.mass.M) + 1e-6 * np.asarray(ops.force.K)  # DS's position matrix M + h² K
+    np.testing.assert_allclose(ops.position.inverse_Gt, np.linalg.solve(A, G.T), rtol=1e-10,
                                atol=1e-12 * np.abs(np.linalg.solve(A, G.T)).max())
 
 
@@ -126,6 +129,7 @@ def test_bounded_lapack_batches_chunk_a_vmapped_batch_with_the_same_results(n, c
         Tridiagonal,
         band_matrix,
         bounded_lapack_batches,
+        dense_solve,
         masked_solve,
     )
 

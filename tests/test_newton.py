@@ -90,7 +90,7 @@ def test_reused_subproblems_are_those_left_non_constant(name):
     scene = load_scene(name)
     for scheme in (nsga_jax.DS(reuse_min_dof=0), nsga_jax.DSn(reuse_min_dof=0)):
         ops = scheme.prepare(scene.model, 1e-3, 0.0)
-        constant = (ops.smooth_inv is not None, ops.position_inv is not None, ops.velocity_inv is not None)
+        constant = (ops.smooth.is_constant, ops.position.is_constant, ops.velocity.is_constant)
         has_jumps = scene.model.n_constraints > 0
         expected = (not constant[0], has_jumps and not constant[1], has_jumps and not constant[2])
         assert scheme.reused(scene.model) == expected
@@ -100,6 +100,34 @@ def test_reused_subproblems_are_those_left_non_constant(name):
         else:
             assert state.factorisations is None
     assert dataclasses.replace(nsga_jax.DS(reuse_min_dof=0), fast_paths=False).reused(scene.model) == (False,) * 3
+
+
+KINDS = {  # the DS iteration matrices (smooth, position, velocity) each scene's structure gives
+    "impacting_bar": ("ConstantTridiagonal",) * 3,  # linear chain of half-bandwidth 1, affine contact
+    "bouncing_ball": ("ConstantInverse",) * 3,
+    "rigid_box": ("Refactored", "Refactored", "ConstantInverse"),  # curved joints: M + h C is still constant
+    "rigid_pendulum": ("Refactored", "Refactored", "ConstantInverse"),
+    "flexible_pendulum": ("Refactored",) * 3,  # nonlinear beam of 27 coordinates
+    "flexible_cube": ("Held",) * 3,  # nonlinear solid of at least reuse_min_dof coordinates
+}
+
+
+@pytest.mark.parametrize("name", sorted(REGISTRY))
+def test_each_scene_gets_the_iteration_matrices_of_its_structure(name):
+    """The kinds are static: read from the scheme without evaluating anything,
+    they are those ``prepare`` builds; the generic path refactors everything."""
+    scene = load_scene(name)
+    scheme = nsga_jax.DS()
+    kinds = scheme.matrix_kinds(scene.model)
+    assert tuple(kind.__name__ for kind in kinds) == KINDS[name]
+    ops = scheme.prepare(scene.model, 1e-3, 0.0)
+    assert tuple(type(m) for m in (ops.smooth, ops.position, ops.velocity)) == kinds
+    assert scheme.reused(scene.model) == tuple(kind.is_held for kind in kinds)
+    assert ops.mass.is_constant == scene.model.constant_mass
+    assert ops.force.is_constant == scene.model.linear_force
+    assert ops.constraints.is_constant == scene.model.linear_constraints
+    generic = dataclasses.replace(scheme, fast_paths=False)
+    assert {kind.__name__ for kind in generic.matrix_kinds(scene.model)} == {"Refactored"}
 
 
 def test_reuse_gives_the_trajectory_of_newtons_method():

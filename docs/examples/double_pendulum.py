@@ -9,6 +9,8 @@ This file is a worked example of writing one's own model and scene (see
     nsga-jax identify docs/examples/double_pendulum.py --params e --synthetic --true e=0.5 --initial e=0.6
 
     scene = nsga_jax.load_scene("docs/examples/double_pendulum.py", {"e": 0.3})
+    sol = nsga_jax.integrate(scene.model, nsga_jax.DS(), 0.0, 0.5, 1e-3, scene.q0, scene.v0,
+                             adjoint=nsga_jax.ImpactTimeAdjoint())  # differentiable; sees the impact instant move
 
 The system
 ----------

@@ -16,6 +16,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import nsga_jax  # noqa: E402
+from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.scenes import parametrize  # noqa: E402
 
 H, N = 1e-3, 1500
@@ -26,7 +27,8 @@ def main() -> None:
 
     def loss(p, adjoint):
         model, q0, v0, observables = build(p)
-        sol = nsga_jax.integrate(model, nsga_jax.DS(), 0.0, N * H, H, q0, v0, n_steps=N, adjoint=adjoint)
+        sol = nsga_jax.integrate(model, nsga_jax.DS(), 0.0, N * H, H, q0, v0, n_steps=N,
+                                 adjoint=adjoint_named(adjoint))
         return jnp.mean(observables(sol)["tip_u"] ** 2)
 
     for adjoint in ("discrete", "event"):

@@ -5,9 +5,9 @@ largest difference of the two trajectories.
 
 The fast path keeps what the model's static structure makes constant (mass,
 tangents, constraint Jacobian, inverted iteration matrices, the diagonals of
-a banded linear model: ``Operators``), computed once per run, and in models
-of 100 or more coordinates (the cube) keeps its LU factors between Newton
-iterations and steps; the generic path (``fast_paths=False``) evaluates and
+a banded linear model: the objects of ``Operators``), computed once per run,
+and in models of 100 or more coordinates (the cube) keeps its LU factors
+between Newton iterations and steps (a ``Held`` iteration matrix); the generic path (``fast_paths=False``) evaluates and
 factors everything at every Newton iteration. Same windows as
 ``tests/test_performance.py`` (the cube: 20 steps of its impact window). The
 cube's two paths converge to different iterates within the Newton tolerance,

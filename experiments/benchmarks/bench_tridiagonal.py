@@ -32,7 +32,7 @@ def main(batch: int = 64) -> None:
     scene = load_scene("impacting_bar")
     ops = eqx.filter_jit(lambda h: scene.scheme().prepare(scene.model, h, 0.0))(1e-3)
     n = scene.model.n_dof
-    A = ops.M + 1e-6 * ops.K
+    A = ops.mass.M + 1e-6 * ops.force.K
     inverse, band = jnp.linalg.inv(A), band_matrix(A, 1)
     blocks = eqx.filter_jit(Tridiagonal.of)(band)
     x = jnp.asarray(np.random.default_rng(0).normal(size=n))

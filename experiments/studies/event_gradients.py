@@ -1,5 +1,5 @@
 """Gradients through impacts: the discrete-map gradient, the event-aware gradient
-(``adjoint="event"``), finite differences with a small and a large step, and
+(``adjoint=ImpactTimeAdjoint()``), finite differences with a small and a large step, and
 the exact continuous-time derivative, for several step sizes.
 
     python experiments/studies/event_gradients.py [--only ball,pendulum,bar,box_flat]
@@ -45,6 +45,7 @@ import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
 from nsga_jax import plotting  # noqa: E402
+from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.exact import bouncing_ball, rigid_pendulum  # noqa: E402
 from nsga_jax.scenes import load_scene, parametrize  # noqa: E402
 
@@ -77,7 +78,7 @@ class Case:
         def loss(p):
             model, q0, v0, observables = build(p)
             y = observables(nsga_jax.integrate(model, nsga_jax.DS(), 0.0, n * h, h, q0, v0, n_steps=n,
-                                               adjoint=adjoint))
+                                               adjoint=adjoint_named(adjoint)))
             return jnp.mean((jnp.interp(t_data, ts, y[self.observable]) - y_data) ** 2)
 
         return params, loss

@@ -22,6 +22,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.exact import bouncing_ball, rigid_pendulum  # noqa: E402
 from nsga_jax.identify import Data, identify  # noqa: E402
 
@@ -45,7 +46,7 @@ def main() -> None:
         for adjoint in ("discrete", "event"):
             print(f"{name}: {adjoint} gradients", flush=True)
             r = identify(scene, list(true), data, overrides={"h": 1e-3}, initial=initial, true=true,
-                         adjoint=adjoint, max_steps=60, progress=False)
+                         adjoint=adjoint_named(adjoint), max_steps=60, progress=False)
             s = r.summary()
             results.append({"case": name, "adjoint": adjoint, **{k: s[k] for k in (
                 "true", "initial", "recovered", "relative_error", "iterations", "evaluations", "stopped_by",

@@ -52,7 +52,8 @@ def bench(tree: Path, bench_args: list[str], out: Path) -> list[dict]:
         for row in csv.DictReader(f):
             values = {c: float(row[c]) for c in ("us_per_step", "member_steps_per_s", "compile_s")}
             fs = row.get("factor_solve_us") or ""
-            values["step_per_factor_solve"] = float(row["us_per_step"]) / float(fs) if fs not in ("", "nan") else float("nan")
+            measured = fs not in ("", "nan")
+            values["step_per_factor_solve"] = float(row["us_per_step"]) / float(fs) if measured else float("nan")
             rows.append({**{k: row[k] for k in KEY}, **values})
     return rows
 

@@ -21,16 +21,14 @@ from jax import lax
 
 from .._custom_types import Scalar
 from ..models.base import Model
-from ..results import RESULTS, ConfigError, from_code
+from ..results import RESULTS, from_code
 from .base import (
-    DIVERGENCE_FACTOR,
-    Operators,
     StepState,
-    constant_operators,
-    constraint_jacobian,
 )
 from .ds import DS, AbstractGenAlpha
+from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, PositionAux, StepOutput, SubproblemRecord, VelocityAux, make_output
+from .residuals import DIVERGENCE_FACTOR
 from .subproblems import (
     position_problem,
     projection_start,
@@ -57,24 +55,19 @@ class CS(AbstractGenAlpha):
     name = "cs"
     subproblems = ("coupled",)
 
-    def bounds(self):
-        if self.differentiable:
-            raise ConfigError("CS is not differentiable here (its coupled iteration has no implicit adjoint); "
-                              "use DS, DSn or MJ for gradients")
-        return super().bounds()
-
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         co = self.coefficients
         c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
-        return constant_operators(
-            model, t0,
-            smooth=lambda M, K, C: c_vd * M + C + c_q * K,
-            position=lambda M, K, C: M,
-            velocity=lambda M, K, C: M,
-            smooth_needs_constant_G=True,
-            position_needs_constant_G=True,
+        return prepare_operators(
+            model, t0, self.matrix_kinds(model),
+            (lambda M, K, C: c_vd * M + C + c_q * K, lambda M, K, C: M, lambda M, K, C: M),
             enabled=self.fast_paths,
         )
+
+    def matrix_kinds(self, model: Model) -> MatrixKinds:
+        """Constant for a constant mass and a linear force (the smooth and
+        position matrices only with affine constraints), else refactored."""
+        return matrix_kinds(model, needs_constant_G=(True, True, False), enabled=self.fast_paths)
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
         if model.n_constraints == 0:  # no jumps: CS and DS coincide, the coupled iteration is the smooth one
@@ -89,7 +82,7 @@ class CS(AbstractGenAlpha):
         co = self.coefficients
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
-        G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
+        G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
 
         def smooth_res(xs, xp, xv):
             return smooth_problem(model, ops, co, tol, t, h, q_pred, v_pred, offset=(xp[0], xv[0]))
@@ -145,7 +138,8 @@ class CS(AbstractGenAlpha):
             converged, diverged = status(rs, floors)
             return ~converged & ~diverged & (it < self.max_iter)
 
-        carry = lax.while_loop(cond, sweep, (x0, r0, jnp.zeros(3, q_pred.dtype), jnp.zeros((), jnp.int32)))
+        with jax.named_scope("coupled"):
+            carry = lax.while_loop(cond, sweep, (x0, r0, jnp.zeros(3, q_pred.dtype), jnp.zeros((), jnp.int32)))
         (xs, xp, xv), (rs, rp, rv), floors, it = carry
         converged, diverged = status((rs, rp, rv), floors)
         result = RESULTS.where(converged, RESULTS.successful,

@@ -23,10 +23,8 @@ made with them converges too slowly (:func:`~nsga_jax.integrators.newton.newton`
 from __future__ import annotations
 
 import dataclasses
-from typing import cast
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._custom_types import Scalar, ScalarLike, Vector
@@ -34,16 +32,13 @@ from .._util import as_float
 from ..models.base import Model
 from .base import (
     AbstractScheme,
-    Operators,
     StepState,
-    consistent_acceleration,
-    constant_operators,
-    constraint_jacobian,
-    force_at,
 )
 from .coefficients import GenAlphaCoefficients
-from .linalg import Factorisation
+from .iteration_matrix import Held
+from .model_terms import consistent_acceleration, force_at
 from .newton import solve
+from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import (
     NewtonRecord,
     PositionAux,
@@ -121,38 +116,40 @@ class DS(AbstractGenAlpha):
     name = "ds"
     subproblems = ("smooth", "position", "velocity")
 
+    def matrix_kinds(self, model: Model) -> MatrixKinds:
+        """The kinds of the smooth, position and velocity iteration matrices
+        (:func:`~nsga_jax.integrators.operators.matrix_kinds`): constant for a
+        constant mass and a linear force (the smooth and position matrices hold
+        the constraints' curvature, so only with affine constraints), else held
+        between iterations and steps in models of at least ``reuse_min_dof``
+        coordinates, refactored at every iteration in smaller ones."""
+        return matrix_kinds(model, needs_constant_G=(True, True, False), enabled=self.fast_paths,
+                            hold=model.n_dof >= self.reuse_min_dof)
+
     def reused(self, model: Model) -> tuple[bool, bool, bool]:
         """Which sub-problems (smooth, position, velocity) keep a factorisation
-        between steps: those whose iteration matrix :meth:`prepare` does not
-        invert once, in models of at least ``reuse_min_dof`` coordinates.
-        (Read from the structure of ``prepare``'s result, traced abstractly.)"""
-        if not self.fast_paths or model.n_dof < self.reuse_min_dof:
-            return False, False, False
-        # only shapes matter here: a Python 0.0 stands for the start time
-        ops = jax.eval_shape(lambda h: self.prepare(model, h, cast(Scalar, 0.0)), 1.0)
-        has_jumps = model.n_constraints > 0
-        return (ops.smooth_inv is None, has_jumps and ops.position_inv is None,
-                has_jumps and ops.velocity_inv is None)
+        between steps: those whose iteration matrix is :class:`~nsga_jax.integrators.iteration_matrix.Held`
+        (static: read from :meth:`matrix_kinds`, nothing is evaluated)."""
+        kinds = self.matrix_kinds(model)
+        return kinds[0].is_held, kinds[1].is_held, kinds[2].is_held
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
         state = super().init(model, t0, q0, v0)
         reused = self.reused(model)
         if not any(reused):
             return state
-        empty = Factorisation.empty(model.n_dof, state.q.dtype)
+        empty = Held.empty(model.n_dof, state.q.dtype)
         return dataclasses.replace(state, factorisations=tuple(empty if r else None for r in reused))
 
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         co = self.coefficients
         c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
         with_forces = self.nonsmooth_forces
-        return constant_operators(
-            model, t0,
-            smooth=lambda M, K, C: c_vd * M + C + c_q * K,  # eq. 50, S_t^{s*}
-            position=(lambda M, K, C: M + h**2 * K) if with_forces else (lambda M, K, C: M),  # S_t^{p*}
-            velocity=(lambda M, K, C: M + h * C) if with_forces else (lambda M, K, C: M),  # S_t^{v*}
-            smooth_needs_constant_G=True,
-            position_needs_constant_G=True,
+        return prepare_operators(
+            model, t0, self.matrix_kinds(model),
+            (lambda M, K, C: c_vd * M + C + c_q * K,  # eq. 50, S_t^{s*}
+             (lambda M, K, C: M + h**2 * K) if with_forces else (lambda M, K, C: M),  # S_t^{p*}
+             (lambda M, K, C: M + h * C) if with_forces else (lambda M, K, C: M)),  # S_t^{v*}
             enabled=self.fast_paths,
         )
 
@@ -162,12 +159,11 @@ class DS(AbstractGenAlpha):
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
 
-        diff = self.differentiable
         held = state.factorisations or (None, None, None)
         # 1. smooth motion
         co = self.coefficients
         sol_s = solve(smooth_problem, (model, ops, co, tol, t, h, q_pred, v_pred),
-                      smooth_start(v_pred, model.n_bilateral), self.max_iter, diff, held[0])
+                      smooth_start(v_pred, model.n_bilateral), self.max_iter, held[0], name="smooth_motion")
         smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
         qt, vt, vd = smooth.q, smooth.v, smooth.vd
         if model.n_constraints == 0:  # nothing to project: U = W = 0 exactly
@@ -178,14 +174,14 @@ class DS(AbstractGenAlpha):
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
         sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces),
-                      projection_start(model, qt), self.max_iter, diff, held[1])
+                      projection_start(model, qt), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
         # 3. velocity jump
-        G_prev_v_prev = constraint_jacobian(model, ops, state.q) @ state.v
-        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth, G_prev_v_prev,
-                                         self.nonsmooth_forces), projection_start(model, qt), self.max_iter, diff,
-                      held[2])
+        G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
+        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth,
+                                         G_prev_v_prev, self.nonsmooth_forces),
+                      projection_start(model, qt), self.max_iter, held[2], name="velocity_jump")
         W, _ = sol_v.x
         velocity: VelocityAux = sol_v.aux
 

@@ -20,6 +20,7 @@ active set. A must be non-singular, which holds when M is positive definite.
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import contextvars
 import functools
@@ -212,14 +213,6 @@ class Tridiagonal(eqx.Module):
         return out.reshape(p * (s + 1), *rest)[: self.n]
 
 
-def inverse_solve(inverse: "jax.Array | Tridiagonal") -> Solve:
-    """Solve with a constant matrix factorised once: its dense inverse, or
-    its block elimination (:class:`Tridiagonal`)."""
-    if isinstance(inverse, Tridiagonal):
-        return inverse.solve
-    return lambda rhs: inverse @ rhs
-
-
 def band_matrix(matrix: Matrix, b: int) -> jax.Array:
     """The 2b + 1 diagonals of a banded matrix, shape (2b + 1, n):
     ``band[b + k, i] = matrix[i, i + k]`` (zero where i + k is outside)."""
@@ -244,9 +237,33 @@ def dense_solve(matrix: jax.Array) -> Solve:
     return lambda rhs: linear_solve(matrix, rhs)
 
 
-class Factorisation(eqx.Module):
-    """The LU factors of an iteration matrix's top-left block A, kept so that
-    later Newton iterations (and steps) can solve with it again.
+class AbstractFactorisation(eqx.Module):
+    """An iteration matrix's top-left block A (eqs. 47-49) in a form ready to
+    solve with, and the norms of the tangents it was built from.
+
+    Attributes:
+        K_norm, C_norm: Frobenius norms of the stiffness and damping matrices
+            A was built from (the round-off floor of the residual uses them).
+    """
+
+    K_norm: eqx.AbstractVar[Scalar]
+    C_norm: eqx.AbstractVar[Scalar]
+
+    @abc.abstractmethod
+    def solve(self, rhs: jax.Array) -> jax.Array:
+        """``A^{-1} rhs`` for rhs of shape (n,) or (n, m)."""
+
+    def solve_with_constraints(self, rhs: Vector, G: jax.Array) -> tuple[Vector, jax.Array]:
+        """``(A^{-1} rhs, A^{-1} G^T)`` for rhs (n,) and G (m, n): one solve
+        with m + 1 right-hand sides (a constant matrix may have A^{-1} G^T
+        precomputed)."""
+        sol = self.solve(jnp.concatenate([rhs[:, None], G.T], axis=1))
+        return sol[:, 0], sol[:, 1:]
+
+
+class Factorisation(AbstractFactorisation):
+    """The LU factors of an iteration matrix's top-left block A, for the
+    Newton corrections at one iterate (and, held, at later iterations and steps).
 
     Attributes:
         lu, pivots: ``jax.scipy.linalg.lu_factor(A)``, shapes (n, n) and (n,).
@@ -264,12 +281,13 @@ class Factorisation(eqx.Module):
     @classmethod
     def of(cls, matrix: Matrix, K_norm: Scalar, C_norm: Scalar) -> "Factorisation":
         lu, pivots = lu_factor(matrix)
-        return cls(lu, pivots, K_norm, C_norm, jnp.ones((), bool))
+        return cls(lu=lu, pivots=pivots, K_norm=K_norm, C_norm=C_norm, valid=jnp.ones((), bool))
 
     @classmethod
     def empty(cls, n: int, dtype) -> "Factorisation":
         zero = jnp.zeros((), dtype)
-        return cls(jnp.zeros((n, n), dtype), jnp.zeros((n,), jnp.int32), zero, zero, jnp.zeros((), bool))
+        return cls(lu=jnp.zeros((n, n), dtype), pivots=jnp.zeros((n,), jnp.int32), K_norm=zero, C_norm=zero,
+                   valid=jnp.zeros((), bool))
 
     def solve(self, rhs: jax.Array) -> jax.Array:
         """``A^{-1} rhs`` for rhs of shape (n,) or (n, m)."""
@@ -296,7 +314,7 @@ def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
 
 
 def solve_bordered(
-    solve: Solve,
+    matrix: AbstractFactorisation,
     r1: Vector,
     r2: jax.Array,
     G_up: jax.Array,
@@ -304,24 +322,19 @@ def solve_bordered(
     active: ActiveSet,
     k: Scalar,
     p: Scalar,
-    A_inv_Gt: jax.Array | None = None,
 ) -> tuple[Vector, jax.Array]:
     """Newton correction (dx, dmu) of a bordered system (see module docstring).
 
     Args:
-        solve: applies A^{-1}.
+        matrix: the top-left block A, ready to solve with (its A^{-1} G_up^T
+            may be precomputed: :meth:`AbstractFactorisation.solve_with_constraints`).
         r1: coordinate residual, shape (n,).
         r2: constraint residual, shape (m,).
         G_up, G_low: constraint gradient blocks, shape (m, n).
         active: active-set mask, shape (m,).
         k, p: multiplier scaling and penalty.
-        A_inv_Gt: A^{-1} G_up^T, shape (n, m), when it is precomputed.
     """
-    if A_inv_Gt is None:
-        sol = solve(jnp.concatenate([r1[:, None], G_up.T], axis=1))
-        y, A_inv_Gt = sol[:, 0], sol[:, 1:]
-    else:
-        y = solve(r1)
+    y, A_inv_Gt = matrix.solve_with_constraints(r1, G_up)
     D = G_low @ A_inv_Gt
     dmu_red = masked_solve(D, r2 / k**2 + (G_low @ y) / k, active)
     dx = -y + k * (A_inv_Gt @ dmu_red)

@@ -23,25 +23,14 @@ from .._util import as_float
 from ..models.base import Model
 from .base import (
     AbstractScheme,
-    Operators,
-    Scaling,
     StepState,
-    augmented_residual,
-    constant_operators,
-    constraint_floor,
-    constraint_jacobian,
-    convective,
-    curvature,
-    is_unilateral,
-    mass_matrix,
-    mass_product,
-    restitution,
-    roundoff_floor,
-    tangents,
 )
-from .linalg import dense_solve, inverse_solve, solve_bordered
+from .linalg import solve_bordered
+from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve
+from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, StepOutput, SubproblemRecord, VelocityAux, make_output, subproblem_result
+from .residuals import Scaling, augmented_residual, constraint_floor, roundoff_floor
 
 
 class MJ(AbstractScheme):
@@ -62,12 +51,16 @@ class MJ(AbstractScheme):
 
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         th = self.theta
-        return constant_operators(
-            model, t0, smooth=None, position=None,
-            velocity=lambda M, K, C: M + h * th * C + (h * th) ** 2 * K,
-            smooth_needs_constant_G=False, position_needs_constant_G=False, velocity_needs_constant_G=True,
-            enabled=self.fast_paths,
+        return prepare_operators(
+            model, t0, self.matrix_kinds(model),
+            (None, None, lambda M, K, C: M + h * th * C + (h * th) ** 2 * K), enabled=self.fast_paths,
         )
+
+    def matrix_kinds(self, model: Model) -> MatrixKinds:
+        """One velocity-level matrix: constant for a constant mass, a linear
+        force and affine constraints (it holds their curvature), else refactored."""
+        return matrix_kinds(model, needs_constant_G=(False, False, True), present=(False, False, True),
+                            enabled=self.fast_paths)
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
         q0 = jnp.asarray(q0, dtype=float)
@@ -84,10 +77,10 @@ class MJ(AbstractScheme):
         if model.n_constraints:
             closing = model.constraints(q_n + 0.5 * h * v_n) <= 0.0
             candidates = ~is_unilateral(model) | closing
-            restituted = restitution(model, q_n.dtype) * (constraint_jacobian(model, ops, q_n) @ v_n)
+            restituted = restitution(model, q_n.dtype) * (ops.constraints.jacobian(model, q_n) @ v_n)
         args = (model, ops, tol, t, h, self.theta, q_n, v_n, f_n, candidates, restituted)
         x0 = (v_n, jnp.zeros((model.n_constraints,), q_n.dtype))
-        sol = solve(moreau_jean_problem, args, x0, self.max_iter, self.differentiable)
+        sol = solve(moreau_jean_problem, args, x0, self.max_iter, name="moreau_jean")
         v, _ = sol.x
         q = q_n + h * (self.theta * v + (1.0 - self.theta) * v_n)
         kwargs = {}
@@ -118,11 +111,11 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
     def residual(x):
         v, Lam = x
         q = position(v)
-        inertia = mass_product(model, ops, q, v - v_n)
+        inertia = ops.mass.product(model, q, v - v_n)
         force = h * (theta * model.force(q, v, t) + (1.0 - theta) * f_n)
         if model.n_constraints == 0:
             return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())
-        G = constraint_jacobian(model, ops, q)
+        G = ops.constraints.jacobian(model, q)
         gdot = G @ v + restituted
         res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
         return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
@@ -130,24 +123,24 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
     def update(x, res):
         v, Lam = x
         q = position(v)
-        K, C, K_norm, C_norm = tangents(model, ops, q, v, t)
+        K, C, K_norm, C_norm = ops.force.tangents(model, q, v, t)
         floor = roundoff_floor(h, K_norm, C_norm, q, v)
-        if ops.velocity_inv is not None:
-            solve_A = inverse_solve(ops.velocity_inv)
-        else:
-            A = mass_matrix(model, ops, q) + h * theta * C + (h * theta) ** 2 * K
+
+        def matrix():  # M + hθ C + (hθ)² K, with the inertia stiffness and the constraint curvature
+            A = ops.mass.matrix(model, q) + h * theta * C + (h * theta) ** 2 * K
             A = A + h * theta * model.inertia_stiffness(q, v - v_n)
             if model.n_constraints:
                 active, sigma, _ = res.aux
                 A = A - h * theta * curvature(model, q, jnp.where(active, sigma, 0.0))
-            solve_A = dense_solve(A)
+            return A, K_norm, C_norm
+
+        A = ops.velocity.factored(matrix)
         if model.n_constraints == 0:
-            return (-solve_A(res.r), Lam), floor
-        G = constraint_jacobian(model, ops, q)
+            return (-A.solve(res.r), Lam), floor
+        G = ops.constraints.jacobian(model, q)
         floor = floor + constraint_floor(kv, G, v)
         G_low = G + h * theta * convective(model, q, v)
-        dv, dLam = solve_bordered(solve_A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv,
-                                  ops.velocity_inv_Gt)
+        dv, dLam = solve_bordered(A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv)
         return (dv, dLam), floor
 
     return Problem.from_update(residual, update)

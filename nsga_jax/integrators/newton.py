@@ -7,8 +7,10 @@ Each sub-problem of a step is a :class:`Problem` of three pure functions:
     (51) ``tol_r (sum_k ||r_k|| + tol_f)`` built from its terms r_k, and an
     ``aux`` pytree (active set, multipliers...) handed to the two others;
 ``linearise(x, residual) -> J``
-    the iteration matrix at x, factored (the expensive part: tangents and an
-    LU factorisation), or ``None`` where it is a precomputed constant;
+    the iteration matrix at x, ready to solve with: a fresh LU factorisation
+    (the expensive part: tangents and the factorisation), or the precomputed
+    matrix itself where it is constant
+    (:mod:`~nsga_jax.integrators.iteration_matrix`);
 ``correct(x, residual, J) -> (dx, floor)``
     the Newton correction solved with J, and the round-off floor of the
     residual at that iterate.
@@ -33,6 +35,12 @@ Newton's method, so the iteration is never worse than Newton's; at small
 steps, where the matrix changes little, most iterations are one residual and
 one pair of triangular solves. In a batch (``vmap``) the members refactor
 together, and only when one of them needs it (:func:`where_needed`).
+
+The schemes call :func:`solve`: :func:`newton` under a profile scope named for
+the sub-problem (Algorithm 1's smooth motion, position correction and
+velocity jump), with the implicit derivative of the converged solution as a
+custom JVP, so that every step is differentiable and a step that nobody
+differentiates is the Newton loop alone.
 """
 
 from __future__ import annotations
@@ -192,39 +200,61 @@ def newton(
     )
 
 
-def _stop(tree):
-    """stop_gradient on every floating-point array leaf (static values untouched)."""
-    return jax.tree_util.tree_map(
-        lambda a: lax.stop_gradient(a) if eqx.is_inexact_array(a) else a, tree
-    )
-
-
-def solve(builder: Callable[..., Problem], args: tuple, x0: Any, max_iter: int, differentiable: bool,
-          factorisation: Factorisation | None = None) -> NewtonResult:
+def solve(builder: Callable[..., Problem], args: tuple, x0: Any, max_iter: int,
+          factorisation: Factorisation | None = None, name: str = "newton") -> NewtonResult:
     """Newton on the sub-problem ``builder(*args) -> Problem``, modified Newton
-    from ``factorisation`` when one is given (see :func:`newton`).
+    from ``factorisation`` when one is given: :func:`newton`, under the profile
+    scope ``name``, with the implicit derivative of its converged solution.
 
-    With ``differentiable=False`` this is :func:`newton`. With ``True`` the
-    Newton loop runs on stop-gradient copies of ``args`` (so no derivative ever
-    enters the ``while_loop``, and reverse mode works), and the derivative of
-    the converged solution x* comes from one more Newton correction built from
-    the differentiable residual,
+    ``builder`` must close over no arrays: everything the problem depends on
+    is in ``args`` (its floating-point arrays are what the derivative is taken
+    with respect to). The primal is :func:`newton` alone. Differentiated
+    (``jax.jvp``, ``jax.grad``, ``jax.vmap`` of either), the solution x* of
+    R(x, θ) = 0 (θ: the arrays of ``args``) has the tangent of the implicit
+    function theorem,
 
-        x = x* + (dx - stop_gradient(dx)),   dx = -J(x*)^{-1} R(x*, θ),
+        dx = -J(x*)⁻¹ (∂R/∂θ · dθ),
 
-    whose value is x* and whose derivative is -J^{-1} ∂R/∂θ: the implicit
-    function theorem at x*, with the active set of x* frozen and J (built from
-    the stop-gradient arguments, always at x*, never a held factorisation) held
-    fixed. Its accuracy follows the Newton tolerance, as x* does. The Newton
-    iterations are never differentiated.
+    with the active set of x* frozen and J the iteration matrix rebuilt at x*
+    (never a held factorisation); the residual's ``aux`` (multipliers, gaps)
+    follows x* and θ. The Newton iterations are never differentiated; the
+    starting point, the held factorisation and the counters get zero tangents.
+    The accuracy of dx follows the Newton tolerance, as x* does.
     """
-    if not differentiable:
-        return newton(builder(*args), x0, max_iter, factorisation)
-    problem_sg = builder(*_stop(args))
-    sol = newton(problem_sg, _stop(x0), max_iter, _stop(factorisation))
-    residual = builder(*args).residual
+    with jax.named_scope(name):
+        return _implicit_newton(builder, args, x0, factorisation, max_iter=max_iter)
+
+
+@eqx.filter_custom_jvp
+def _implicit_newton(builder, args, x0, factorisation, *, max_iter):
+    return newton(builder(*args), x0, max_iter, factorisation)
+
+
+def _is_none(x) -> bool:
+    return x is None
+
+
+@_implicit_newton.def_jvp
+def _implicit_newton_jvp(primals, tangents, *, max_iter):
+    """The converged solution and its tangent of the implicit function theorem
+    (see :func:`solve`), linear in the tangents of ``args`` and transposable."""
+    builder, args, x0, factorisation = primals
+    t_args = tangents[1]
+    sol = _implicit_newton(builder, args, x0, factorisation, max_iter=max_iter)
+    no_tangent = jax.tree_util.tree_map(_is_none, t_args, is_leaf=_is_none)
+    nondiff, diff = eqx.partition(args, no_tangent, is_leaf=_is_none)
+
+    def residual_at(d, x):
+        return builder(*eqx.combine(d, nondiff)).residual(x)
+
     x_star = sol.x
-    res = residual(x_star)
-    dx, _ = problem_sg.update(x_star, res._replace(aux=_stop(res.aux)))
-    x = jax.tree_util.tree_map(lambda a, d: a + (d - lax.stop_gradient(d)), x_star, dx)
-    return eqx.tree_at(lambda s: (s.x, s.aux), sol, (x, residual(x).aux))
+    res = residual_at(diff, x_star)
+    # ∂R/∂θ · dθ at x*, and the correction -J(x*)⁻¹ applied to it (linear in its
+    # right-hand side, so its jvp is the linear map itself)
+    _, t_r = jax.jvp(lambda d: residual_at(d, x_star).r, (diff,), (t_args,))
+    problem = builder(*args)
+    _, (t_x, _) = jax.jvp(lambda r: problem.update(x_star, res._replace(r=r)), (res.r,), (t_r,))
+    _, t_aux = eqx.filter_jvp(lambda d, x: residual_at(d, x).aux, (diff, x_star), (t_args, t_x))
+    t_sol = NewtonResult(x=t_x, aux=t_aux, iterations=None, converged=None, residual_norm=None, tolerance=None,
+                         factorisation=jax.tree_util.tree_map(lambda _: None, sol.factorisation))
+    return sol, t_sol

@@ -2,8 +2,12 @@
 
 Each builder returns the :class:`~nsga_jax.integrators.newton.Problem`
 ``(residual, linearise, correct)`` that :func:`~nsga_jax.integrators.newton.newton`
-iterates (``linearise`` is ``None``-valued where the model's structure makes
-the iteration matrix a precomputed constant):
+iterates. The model's terms and the iteration matrices are the objects of
+``ops`` (:class:`~nsga_jax.integrators.operators.Operators`): ``linearise``
+is the sub-problem's matrix at the iterate, ``ops.smooth.factored(...)`` and
+so on, which is the precomputed matrix itself where the model's structure
+makes it constant and a fresh LU factorisation otherwise
+(:mod:`~nsga_jax.integrators.iteration_matrix`):
 
 - :func:`smooth_problem` (eqs. 33-34, matrix 47): unknowns x = (ṽ, λ̃), the
   smooth velocity and the scaled bilateral multipliers, with v̇̃ and q̃ affine in
@@ -27,32 +31,13 @@ import jax.numpy as jnp
 
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
-from .base import (
-    ForceAt,
-    Operators,
-    Scaling,
-    augmented_residual,
-    bilateral_jacobian,
-    constraint_floor,
-    constraint_jacobian,
-    convective,
-    curvature,
-    force_at,
-    force_change,
-    force_near,
-    is_unilateral,
-    mass_matrix,
-    mass_norm,
-    mass_product,
-    pad_bilateral,
-    restitution,
-    roundoff_floor,
-    tangents,
-)
 from .coefficients import GenAlphaCoefficients
-from .linalg import Factorisation, inverse_solve, solve_bordered
+from .linalg import solve_bordered
+from .model_terms import ForceAt, convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound
+from .operators import Operators
 from .records import PositionAux, VelocityAux
+from .residuals import Scaling, augmented_residual, constraint_floor, roundoff_floor
 
 
 class Smooth(NamedTuple):
@@ -79,7 +64,7 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
     n, nb = model.n_dof, model.n_bilateral
     ks = ps = Scaling.of(model, h).ks
     c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
-    f_pred = force_at(model, q_pred, v_pred, t) if ops.K_band is not None else None
+    f_pred = ops.force.reference(model, q_pred, v_pred, t)
 
     def state(vt):
         qt = q_pred + c_q * (vt - v_pred)
@@ -90,11 +75,11 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
     def residual(x):
         vt, lam = x
         _, vd, q, v = state(vt)
-        f = force_near(model, ops, f_pred, q, v, t)
-        inertia = mass_product(model, ops, q, vd)
+        f = ops.force.near(model, f_pred, q, v, t)
+        inertia = ops.mass.product(model, q, vd)
         if nb == 0:
             return Residual(inertia - f, convergence_bound([inertia, f], tol_r, tol_f), jnp.zeros((0,), q.dtype))
-        GB = bilateral_jacobian(model, ops, q)
+        GB = ops.constraints.bilateral(model, q)
         mu = ks * lam - ps * (GB @ vt)
         reaction = GB.T @ mu
         r2 = -ks * (GB @ vt)
@@ -102,28 +87,27 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
         return Residual(r, convergence_bound([inertia, f, reaction, r2], tol_r, tol_f), mu)
 
     def linearise(x, res):
-        if ops.smooth_inv is not None:
-            return None
-        vt, _ = x
-        _, vd, q, v = state(vt)
-        K, C, K_norm, C_norm = tangents(model, ops, q, v, t)
-        Ks = K + model.inertia_stiffness(q, vd) - curvature(model, q, pad_bilateral(model, res.aux))
-        return Factorisation.of(c_vd * mass_matrix(model, ops, q) + C + c_q * Ks, K_norm, C_norm)
+        def matrix():  # eq. 47's top-left block, S_t^s
+            vt, _ = x
+            _, vd, q, v = state(vt)
+            K, C, K_norm, C_norm = ops.force.tangents(model, q, v, t)
+            Ks = K + model.inertia_stiffness(q, vd) - curvature(model, q, pad_bilateral(model, res.aux))
+            return c_vd * ops.mass.matrix(model, q) + C + c_q * Ks, K_norm, C_norm
 
-    def correct(x, res, fac):
+        return ops.smooth.factored(matrix)
+
+    def correct(x, res, matrix):
         vt, lam = x
         _, vd, q, v = state(vt)
-        K_norm, C_norm = (ops.K_norm, ops.C_norm) if fac is None else (fac.K_norm, fac.C_norm)
         # v̇̃ = c_vd (ṽ - ṽ_pred) cancels: its round-off is eps c_vd ||M|| ||ṽ||
-        floor = roundoff_floor(1.0, K_norm, C_norm, q, v, c_vd * mass_norm(model, ops, q) * jnp.linalg.norm(vt))
-        solve = inverse_solve(ops.smooth_inv) if fac is None else fac.solve
+        floor = roundoff_floor(1.0, matrix.K_norm, matrix.C_norm, q, v,
+                               c_vd * ops.mass.norm(model, q) * jnp.linalg.norm(vt))
         if nb == 0:
-            return (-solve(res.r), jnp.zeros((0,), vt.dtype)), floor
-        GB = bilateral_jacobian(model, ops, q)
+            return (-matrix.solve(res.r), jnp.zeros((0,), vt.dtype)), floor
+        GB = ops.constraints.bilateral(model, q)
         floor = floor + constraint_floor(ks, GB, vt)
         G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
-        dv, dlam = solve_bordered(solve, res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool),
-                                  ks, ps, ops.smooth_inv_Gt)
+        dv, dlam = solve_bordered(matrix, res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool), ks, ps)
         return (dv, dlam), floor
 
     return Problem(residual, linearise, correct)
@@ -150,11 +134,12 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
-    GB_smooth = bilateral_jacobian(model, ops, smooth.q) if (with_forces and nb and ops.G is None) else None
+    curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
+    GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
     def f_p(q, G):
-        fp = force_change(model, ops, f_smooth, q, smooth.v, t)
-        if GB_smooth is not None:
+        fp = ops.force.change(model, f_smooth, q, smooth.v, t)
+        if curved_joints:
             fp = fp + (G[:nb] - GB_smooth).T @ smooth.lam  # (g_q^T - g̃_q^T) λ̃, eq. 29
         return fp
 
@@ -162,38 +147,37 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         U, nu = x
         q = smooth.q + U
         g = model.constraints(q)
-        G = constraint_jacobian(model, ops, q)
-        inertia = mass_product(model, ops, smooth.q, U)
+        G = ops.constraints.jacobian(model, q)
+        inertia = ops.mass.product(model, smooth.q, U)
         force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
         res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
         return res._replace(aux=PositionAux(*res.aux, gap=g, jacobian=G))
 
     def linearise(x, res):
-        if ops.position_inv is not None:
-            return None
-        U, _ = x
-        active, xi, _, _ = res.aux
-        q = smooth.q + U
-        # -d(g_q^{A T} ξ^A)/dq - h² df^p/dq; the penalty term is left to solve_bordered
-        mu = jnp.where(active, xi, 0.0)
-        A = mass_matrix(model, ops, smooth.q)
-        K_norm = C_norm = jnp.zeros((), q.dtype)
-        if with_forces:
-            K, _, K_norm, C_norm = tangents(model, ops, q, smooth.v, t)
-            mu = mu + h**2 * pad_bilateral(model, smooth.lam)
-            A = A + h**2 * K
-        return Factorisation.of(A - curvature(model, q, mu), K_norm, C_norm)
+        def matrix():  # eq. 48's top-left block, S_t^p: -d(g_q^{A T} ξ^A)/dq - h² df^p/dq
+            U, _ = x
+            active, xi, _, _ = res.aux
+            q = smooth.q + U
+            # the penalty term is left to solve_bordered
+            mu = jnp.where(active, xi, 0.0)
+            A = ops.mass.matrix(model, smooth.q)
+            K_norm = C_norm = jnp.zeros((), q.dtype)
+            if with_forces:
+                K, _, K_norm, C_norm = ops.force.tangents(model, q, smooth.v, t)
+                mu = mu + h**2 * pad_bilateral(model, smooth.lam)
+                A = A + h**2 * K
+            return A - curvature(model, q, mu), K_norm, C_norm
 
-    def correct(x, res, fac):
+        return ops.position.factored(matrix)
+
+    def correct(x, res, matrix):
         U, nu = x
         active, xi, _, G = res.aux
         q = smooth.q + U
         floor = constraint_floor(kp, G, q)
         if with_forces:
-            K_norm, C_norm = (ops.K_norm, ops.C_norm) if fac is None else (fac.K_norm, fac.C_norm)
-            floor = floor + roundoff_floor(h**2, K_norm, C_norm, q, smooth.v)
-        solve = inverse_solve(ops.position_inv) if fac is None else fac.solve
-        dU, dnu = solve_bordered(solve, res.r[:n], res.r[n:], G, G, active, kp, pp, ops.position_inv_Gt)
+            floor = floor + roundoff_floor(h**2, matrix.K_norm, matrix.C_norm, q, smooth.v)
+        dU, dnu = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kp, pp)
         return (dU, dnu), floor
 
     return Problem(residual, linearise, correct)
@@ -216,19 +200,19 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     kv = pv = Scaling.of(model, h).kv
     unilateral = is_unilateral(model)
     q = smooth.q + U
-    G = constraint_jacobian(model, ops, q)
+    G = ops.constraints.jacobian(model, q)
     restituted = restitution(model, q.dtype) * G_prev_v_prev
     f_const = None
     if with_forces:
         # terms of f* (eq. 8) that W does not change: (g_q^T - g̃_q^T) λ̃ - (M(q) - M(q̃)) v̇̃
         f_const = jnp.zeros_like(q)
-        if nb and ops.G is None:
-            f_const = f_const + (G[:nb] - bilateral_jacobian(model, ops, smooth.q)).T @ smooth.lam
+        if nb and not ops.constraints.is_constant:
+            f_const = f_const + (G[:nb] - ops.constraints.bilateral(model, smooth.q)).T @ smooth.lam
         if not model.constant_mass:
             f_const = f_const - (model.mass_product(q, smooth.vd) - model.mass_product(smooth.q, smooth.vd))
         if not model.velocity_dependent_force:  # f(q, v) - f(q̃, ṽ) does not change with W
             assert f_smooth is not None  # given whenever with_forces
-            f_const = f_const + force_change(model, ops, f_smooth, q, smooth.v, t)
+            f_const = f_const + ops.force.change(model, f_smooth, q, smooth.v, t)
 
     def residual(x):
         W, Lam = x
@@ -237,35 +221,34 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if with_forces:
             f_star = f_const
             if model.velocity_dependent_force:
-                f_star = f_star + force_change(model, ops, f_smooth, q, v, t)
+                f_star = f_star + ops.force.change(model, f_smooth, q, v, t)
             force = h * f_star
         else:
             force = jnp.zeros_like(W)
-        res = augmented_residual(mass_product(model, ops, q, W), force, G, gdot, Lam, kv, pv, candidates,
+        res = augmented_residual(ops.mass.product(model, q, W), force, G, gdot, Lam, kv, pv, candidates,
                                  unilateral, tol_r, tol_f)
         return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
 
     def linearise(x, res):
-        if ops.velocity_inv is not None:
-            return None
-        W, _ = x
-        A = mass_matrix(model, ops, q)
-        if not with_forces:
-            zero = jnp.zeros((), q.dtype)
-            return Factorisation.of(A, zero, zero)
-        _, C, K_norm, C_norm = tangents(model, ops, q, smooth.v + W, t)
-        return Factorisation.of(A + h * C, K_norm, C_norm)
+        def matrix():  # eq. 49's top-left block, S_t^v
+            W, _ = x
+            A = ops.mass.matrix(model, q)
+            if not with_forces:
+                zero = jnp.zeros((), q.dtype)
+                return A, zero, zero
+            _, C, K_norm, C_norm = ops.force.tangents(model, q, smooth.v + W, t)
+            return A + h * C, K_norm, C_norm
 
-    def correct(x, res, fac):
+        return ops.velocity.factored(matrix)
+
+    def correct(x, res, matrix):
         W, Lam = x
         active = res.aux[0]
         v = smooth.v + W
         floor = constraint_floor(kv, G, v)
         if with_forces:
-            K_norm, C_norm = (ops.K_norm, ops.C_norm) if fac is None else (fac.K_norm, fac.C_norm)
-            floor = floor + roundoff_floor(h, K_norm, C_norm, q, v)
-        solve = inverse_solve(ops.velocity_inv) if fac is None else fac.solve
-        dW, dLam = solve_bordered(solve, res.r[:n], res.r[n:], G, G, active, kv, pv, ops.velocity_inv_Gt)
+            floor = floor + roundoff_floor(h, matrix.K_norm, matrix.C_norm, q, v)
+        dW, dLam = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kv, pv)
         return (dW, dLam), floor
 
     return Problem(residual, linearise, correct)

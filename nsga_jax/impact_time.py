@@ -1,19 +1,18 @@
 """Impact-time sensitivity: the derivative of an impact step in continuous time.
 
 A time-stepping scheme puts every impact on the step grid. Its exact
-derivative (what :func:`~nsga_jax.trajectory` returns with
-``adjoint="discrete"``) therefore holds each impact at its step while a
+derivative (what :func:`~nsga_jax.integrate` returns with
+``adjoint=DiscreteAdjoint()``) therefore holds each impact at its step while a
 parameter moves: it misses how the impact *instant* moves, which in continuous
 time changes the state after the impact by the saltation term
 ``-(F⁺ - J F⁻) δt*`` (F± the vector fields before and after, J the impact
 map's Jacobian, δt* = -δg / ġ⁻ the shift of the impact instant). On a bouncing
 ball that is half of the derivative, at every step size.
 
-With ``adjoint="event"`` each step where a contact closes (active in the
-step's velocity problem and not in the previous step's, approaching at t_n)
-gets the derivative of
-a continuous-time rebuild of that step, exact to first order in h, while its
-value stays the scheme's:
+With :class:`~nsga_jax.ImpactTimeAdjoint` each step where a contact closes
+(active in the step's velocity problem and not in the previous step's,
+approaching at t_n) gets the derivative of a continuous-time rebuild of that
+step, exact to first order in h, while its value stays the scheme's:
 
 1. the impact instant t_n + τ is the first root (in [-h, h]) of a closing
    contact's gap along the smooth motion ``q(s) = q_n + s v_n + s²/2 a_n``
@@ -39,17 +38,12 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._custom_types import Scalar, Vector
-from .integrators.base import (
-    ROUNDOFF_FACTOR,
-    Operators,
-    StepState,
-    consistent_acceleration,
-    constraint_jacobian,
-    is_unilateral,
-    restitution,
-)
+from .integrators.base import StepState
 from .integrators.linalg import dense_solve, masked_solve
+from .integrators.model_terms import consistent_acceleration, is_unilateral, restitution
+from .integrators.operators import Operators
 from .integrators.records import StepOutput
+from .integrators.residuals import ROUNDOFF_FACTOR
 from .models.base import Model
 
 NEWTON_ITERATIONS = 6
@@ -115,7 +109,7 @@ def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput
     tau = impact_instant(model, q, v, a, h, closing)
     q_hit = q + tau * v + 0.5 * tau**2 * a
     v_minus = v + tau * a
-    G = constraint_jacobian(model, ops, q_hit)
+    G = ops.constraints.jacobian(model, q_hit)
     M = model.mass(q_hit)
     e = restitution(model, q.dtype)
     joints = ~is_unilateral(model)
@@ -135,7 +129,7 @@ def with_impact_time_sensitivity(model: Model, ops: Operators, state: StepState,
     contact closes, the derivative of :func:`rebuilt_step` in place of the
     scheme's derivative of (q, v). ``was_active``: the previous step's velocity
     active set on the contacts (nu,)."""
-    G_n = constraint_jacobian(model, ops, state.q)
+    G_n = ops.constraints.jacobian(model, state.q)
     closing = lax.stop_gradient(closing_contacts(model, G_n, state, out, was_active))
     any_closing = jnp.any(closing)
 

@@ -1,0 +1,164 @@
+"""A run's operators: the model's terms and the three sub-problems' iteration
+matrices, each as an object whose kind the model's structure decides at
+trace time, with what is constant computed once per step size (outside the
+time loop).
+
+A scheme's ``prepare`` calls :func:`prepare_operators` with the kinds of
+:func:`matrix_kinds` and the top-left blocks of its iteration matrices
+(eqs. 47-50). ``fast_paths=False`` keeps nothing constant
+(:func:`generic_operators`): every term is evaluated and every matrix
+factored at every iteration.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from .._custom_types import Matrix, Scalar
+from ..models.base import Model
+from .iteration_matrix import (
+    AbstractIterationMatrix,
+    ConstantInverse,
+    ConstantTridiagonal,
+    Held,
+    Refactored,
+)
+from .linalg import band_matrix
+from .model_terms import (
+    AbstractConstraintJacobian,
+    AbstractForce,
+    AbstractMass,
+    BandedLinearForce,
+    BandedMass,
+    ConstantJacobian,
+    ConstantMass,
+    LinearForce,
+    NonlinearForce,
+    VaryingJacobian,
+    VaryingMass,
+)
+
+MatrixKinds = tuple[type[AbstractIterationMatrix], type[AbstractIterationMatrix], type[AbstractIterationMatrix]]
+"""The kinds of the smooth, position and velocity iteration matrices."""
+
+TopLeft = Callable[[Matrix, Matrix, Matrix], Matrix]
+"""``(M, K, C) -> A``: the constraint-free block of an iteration matrix."""
+
+
+class Operators(eqx.Module):
+    """What a step uses of the model and its iteration matrices, for one step size.
+
+    Attributes:
+        mass: M(q) (:class:`~nsga_jax.integrators.model_terms.ConstantMass`,
+            ``BandedMass`` or ``VaryingMass``).
+        force: f and its tangents K, C (``LinearForce``, ``BandedLinearForce``
+            or ``NonlinearForce``).
+        constraints: g_q (``ConstantJacobian`` for affine constraints, or ``VaryingJacobian``).
+        smooth, position, velocity: the iteration matrices of the three
+            sub-problems (eqs. 47-49; :mod:`~nsga_jax.integrators.iteration_matrix`);
+            a scheme without such a sub-problem has a ``Refactored`` it never uses.
+    """
+
+    mass: AbstractMass
+    force: AbstractForce
+    constraints: AbstractConstraintJacobian
+    smooth: AbstractIterationMatrix
+    position: AbstractIterationMatrix
+    velocity: AbstractIterationMatrix
+
+
+def banded(model: Model) -> bool:
+    """Whether a model's constant M and K are worked with on their band: a
+    linear model with constant mass that declares a half-bandwidth b with
+    2b + 1 <= n / 8 (a 1D chain); wider bands gain nothing over the dense or
+    element-by-element products."""
+    b = model.bandwidth
+    return (b is not None and model.constant_mass and model.linear_force
+            and 8 * (2 * b + 1) <= model.n_dof)
+
+
+def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
+                 present: tuple[bool, bool, bool] = (True, True, True), enabled: bool = True,
+                 hold: bool = False) -> MatrixKinds:
+    """The kinds of the smooth, position and velocity iteration matrices,
+    from the model's static structure alone (no array is evaluated).
+
+    A matrix is constant when the model has a constant mass and a linear
+    force, and, where it holds the constraints' curvature
+    (``needs_constant_G``; the smooth one only through the bilateral rows),
+    affine constraints; a chain of half-bandwidth 1 then solves it by block
+    elimination. Otherwise it is refactored at every iteration, or held
+    between iterations and steps when ``hold``. ``present``: the scheme has
+    that sub-problem (the position and velocity ones only with constraints).
+    ``enabled=False`` (the generic path) refactors everything.
+    """
+    nb, nc = model.n_bilateral, model.n_constraints
+    present = (present[0], present[1] and nc > 0, present[2] and nc > 0)
+    needs = (needs_constant_G[0] and nb > 0, needs_constant_G[1], needs_constant_G[2])
+    constant_G = model.linear_constraints and nc > 0
+    linear = enabled and model.constant_mass and model.linear_force
+    tridiagonal = banded(model) and model.bandwidth == 1
+
+    def kind(is_present: bool, needs_G: bool) -> type[AbstractIterationMatrix]:
+        if is_present and linear and (constant_G or not needs_G):
+            return ConstantTridiagonal if tridiagonal else ConstantInverse
+        return Held if (is_present and enabled and hold) else Refactored
+
+    return kind(present[0], needs[0]), kind(present[1], needs[1]), kind(present[2], needs[2])
+
+
+def generic_operators() -> Operators:
+    """Nothing constant: every term evaluated and every matrix factored at every iteration."""
+    return Operators(mass=VaryingMass(), force=NonlinearForce(), constraints=VaryingJacobian(),
+                     smooth=Refactored(), position=Refactored(), velocity=Refactored())
+
+
+def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
+                      top_lefts: tuple[TopLeft | None, TopLeft | None, TopLeft | None],
+                      enabled: bool = True) -> Operators:
+    """Evaluate what the model's structure makes constant (M, K and C, g_q,
+    their bands) and factorise the iteration matrices that ``kinds`` (from
+    :func:`matrix_kinds`) say are constant, from their ``top_lefts``
+    (smooth, position, velocity; ``None`` for a sub-problem the scheme does
+    not have). The smooth block couples only to the bilateral rows of g_q,
+    the others to all rows. ``enabled=False``: :func:`generic_operators`.
+    """
+    if not enabled:
+        return generic_operators()
+    n, nb, nc = model.n_dof, model.n_bilateral, model.n_constraints
+    zeros = jnp.zeros((n,))
+    b = model.bandwidth if banded(model) else None
+    mass: AbstractMass = VaryingMass()
+    M = K = C = None
+    if model.constant_mass:
+        M = model.mass(zeros)
+        M_norm = jnp.linalg.norm(M)
+        mass = ConstantMass(M, M_norm) if b is None else BandedMass(M, M_norm, band_matrix(M, b))
+    force: AbstractForce = NonlinearForce()
+    K_norm = C_norm = jnp.zeros(())
+    if model.linear_force:
+        K, C = model.tangents(zeros, zeros, t0)
+        if not model.velocity_dependent_force:
+            C = jnp.zeros_like(K)
+        K_norm, C_norm = jnp.linalg.norm(K), jnp.linalg.norm(C)
+        force = (LinearForce(K, C, K_norm, C_norm) if b is None else
+                 BandedLinearForce(K, C, K_norm, C_norm, band_matrix(K, b), band_matrix(C, b),
+                                   model.velocity_dependent_force))
+    constraints: AbstractConstraintJacobian = VaryingJacobian()
+    if model.linear_constraints and nc > 0:
+        constraints = ConstantJacobian(model.constraint_jacobian(zeros), nb)
+
+    def build(kind: type[AbstractIterationMatrix], top_left: TopLeft | None, rows: int) -> AbstractIterationMatrix:
+        if not issubclass(kind, (ConstantInverse, ConstantTridiagonal)):
+            return kind()
+        assert top_left is not None and M is not None and K is not None and C is not None  # matrix_kinds: linear
+        G = constraints.G[:rows] if (isinstance(constraints, ConstantJacobian) and rows) else None
+        return kind.of(top_left(M, K, C), G, K_norm, C_norm)
+
+    smooth, position, velocity = (build(kind, top_left, rows)
+                                  for kind, top_left, rows in zip(kinds, top_lefts, (nb, nc, nc)))
+    return Operators(mass=mass, force=force, constraints=constraints,
+                     smooth=smooth, position=position, velocity=velocity)
