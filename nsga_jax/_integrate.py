@@ -41,9 +41,10 @@ from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template
 from .models.base import Model
 from .results import RESULTS, ConfigError, from_code
+from .run_inputs import check_scheme
 from .saveat import HOST_ONLY, SaveAt, refuse
 from .solution import Solution, first_failed_code, traced_stats
-from .validation import check_model_fields, check_scheme, describe, integer, require_instance, time_grid
+from .validation import check_model_fields, describe, integer, require_instance, time_grid
 
 MAX_SCAN_STEPS = 2**31 - 1
 """The most steps of one pure run (its scan counts steps in int32; every

@@ -31,42 +31,19 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from .chunks import chunk_files
 from .compilation_cache import cache_events, compile_source
 from .diagnosis import FLOAT32_HINT, nonfinite_origin
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
-from .precision import DTYPES, _cast, precision
+from .precision import DTYPES, cast_floats, precision
 from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
+from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .saveat import DEVICE_ONLY, SaveAt, refuse
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import (
-    check_initial_state,
-    check_memory,
-    check_model,
-    check_model_fields,
-    check_scheme,
-    choice,
-    integer,
-    require_instance,
-    state_vector,
-    step_count,
-    time_grid,
-)
-
-# ----------------------------------------------------------------- validation
-# (the checks live in :mod:`nsga_jax.validation`; these names are kept for the
-# modules and tests that call them from here)
-
-validate_model = check_model_fields
-validate_scheme = check_scheme
-validate_initial_state = check_initial_state
-
-
-def _n_steps(t0: float, t1: float, h: float) -> int:
-    return step_count(t0, t1, h)
-
+from .validation import check_memory, choice, integer, require_instance, time_grid
 
 # --------------------------------------------------------------------- the loop
 
@@ -126,13 +103,13 @@ def chunk_length(model: Model) -> int:
 _run_chunk_jit = cast(Any, eqx.filter_jit(_run_chunk))
 
 
-def _prepare_and_init_raw(model, scheme, t0, q0, v0, h):
+def prepare_and_init(model, scheme, t0, q0, v0, h):
     ops = scheme.prepare(model, h, t0)
     state = scheme.init(model, t0, q0, v0)
     return ops, state
 
 
-_prepare_and_init = cast(Any, eqx.filter_jit(_prepare_and_init_raw))  # used through ``lower`` (as above)
+_prepare_and_init = cast(Any, eqx.filter_jit(prepare_and_init))  # used through ``lower`` (as above)
 
 
 def simulate(
@@ -199,7 +176,7 @@ def simulate(
     raise :class:`TypeError`, bad values :class:`ConfigError`.
     """
     check_scheme(scheme)
-    check_model(model)
+    check_model_instance(model)
     dtype = choice("dtype", dtype, DTYPES)
     t0, t1, h, n_steps = time_grid(t0, t1, h, dtype)
     q0 = state_vector("q0", q0, model.n_dof)
@@ -221,11 +198,9 @@ def simulate(
                  record_numbers=sum(packed_sizes(template)))
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     if saveat.chunks is not None:
-        from .output import chunk_files  # only here: the output module loads plotting
-
         on_chunk = chunk_files(saveat.chunks, then=on_chunk)
     with precision(dtype):
-        run, totals, error = _host_loop(*_cast((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
+        run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
                                         v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
                                         on_chunk=on_chunk, record_every=record_every, dtype=dtype)
     warnings += invariant_warnings(totals, tolerances, h, t0)
@@ -332,7 +307,7 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         if halt:
             break
 
-    records = _prepend_initial(model, chunks, t0, q0, v0)
+    records = prepend_initial(model, chunks, t0, q0, v0)
     ts = t0 + h * np.concatenate([[0], *numbers]).astype(np.float64)
     run = dict(
         records=records,
@@ -380,7 +355,7 @@ def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> tup
     return jax.tree_util.tree_map(lambda x: x[keep], records), numbers[keep]
 
 
-def _prepend_initial(model: Model, chunks: list[StepOutput], t0, q0, v0) -> StepOutput:
+def prepend_initial(model: Model, chunks: list[StepOutput], t0, q0, v0) -> StepOutput:
     """Concatenate the chunks after a zero record holding the initial state."""
     first = chunks[0]
     init = jax.tree_util.tree_map(lambda x: np.zeros((1,) + x.shape[1:], x.dtype), first)

@@ -29,26 +29,17 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ._simulate import _prepare_and_init_raw, _prepend_initial, chunk_length
+from ._simulate import chunk_length, prepare_and_init, prepend_initial
 from .integrators.base import AbstractScheme
 from .integrators.linalg import bounded_lapack_batches
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import RunTotals
-from .precision import DTYPES, _cast, precision
+from .precision import DTYPES, cast_floats, precision
 from .results import ConfigError, Result
+from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import (
-    check_initial_state,
-    check_memory,
-    check_model,
-    check_scheme,
-    choice,
-    describe,
-    require_instance,
-    state_vector,
-    time_grid,
-)
+from .validation import check_memory, choice, describe, require_instance, time_grid
 
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
@@ -171,7 +162,7 @@ def _prepare_members(*members):
     then stay those of one member (see :func:`needs_bounded_lapack_batches`)."""
 
     def one(args):
-        return _prepare_and_init_raw(*args)
+        return prepare_and_init(*args)
 
     return lax.map(one, members)
 
@@ -274,7 +265,7 @@ def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float
     """One member's :class:`Solution` from its (NumPy) records. Without
     ``totals`` the records hold every step and give the statistics and the
     first failure; with them (records strided) those come from ``totals``."""
-    records = _prepend_initial(model, chunks, t0, q0, v0)
+    records = prepend_initial(model, chunks, t0, q0, v0)
     if totals is None:
         bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
         result = Result(int(records.result[bad[0]])) if bad.size else Result.successful
@@ -313,7 +304,7 @@ def simulate_batch(
     quantities of each finished member, as in :func:`~nsga_jax.simulate`.
     """
     check_scheme(scheme)
-    check_model(model)
+    check_model_instance(model)
     dtype = choice("dtype", dtype, DTYPES)
     hs = np.atleast_1d(np.asarray(hs, dtype=float)) if not isinstance(hs, (str, bytes)) else hs
     if isinstance(hs, (str, bytes)) or hs.ndim != 1 or hs.size == 0:
@@ -331,7 +322,7 @@ def simulate_batch(
                  record_numbers=sum(packed_sizes(template)), what="each run's model")
     B = len(hs)
     with precision(dtype):
-        model_c, scheme_c = _cast((model, scheme), dtype)
+        model_c, scheme_c = cast_floats((model, scheme), dtype)
         run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),
                        np.tile(v0.astype(dtype), (B, 1)), hs.astype(dtype), n_steps, mesh=mesh)
         chunks: list[list[StepOutput]] = [[] for _ in range(B)]

@@ -29,7 +29,7 @@ import numpy as np
 from .batch import BatchRun, broadcast_members
 from .compilation_cache import compilation_cache
 from .metrics import relative_l1_error
-from .precision import _cast, precision
+from .precision import cast_floats, precision
 from .results import ConfigError
 from .scenes.base import REGISTRY, Scene, load_scene
 from .validation import step_count
@@ -113,7 +113,7 @@ def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
     estimate exceeds ``max_seconds`` (the batch is then not run in full)."""
     n = step_count(0.0, scene.solver["t_end"], scene.solver["h"])
     with precision(dtype):
-        model, scheme = _cast((scene.model, scene.scheme()), dtype)
+        model, scheme = cast_floats((scene.model, scene.scheme()), dtype)
         members = broadcast_members(model, batch)
         q0 = np.tile(scene.q0.astype(dtype), (batch, 1))
         v0 = np.tile(scene.v0.astype(dtype), (batch, 1))

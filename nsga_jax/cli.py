@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .cli_options import CACHE_ENV, _Parser, _parser  # noqa: F401  (the options of every command)
+from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser  # noqa: F401  (the options of every command)
 from .results import ConfigError, ConvergenceError, InvariantError
 
 EXIT_FAILED = 1
@@ -66,7 +66,7 @@ def _run(args) -> int:
     except KeyboardInterrupt:
         kept = sorted((Path(out) / "partial").glob("chunk_*.npz"))
         print(f"\ninterrupted: {len(kept)} finished chunk(s) of steps kept in {Path(out) / 'partial'} "
-              "(nsga_jax.output.load_chunks reads them)", file=sys.stderr)
+              "(nsga_jax.chunks.load_chunks reads them)", file=sys.stderr)
         return EXIT_INTERRUPTED
     info = summary(sol, scene.name, s["scheme"],
                    {"parameters": scene.parameters, "solver": scene.solver,
@@ -358,7 +358,7 @@ def main(argv: list[str] | None = None) -> int:
     traceback."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)  # effective where numpy is not loaded yet
     try:
-        args = _parser().parse_args(argv)
+        args = command_parser().parse_args(argv)
         return COMMANDS[args.command](args)
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)

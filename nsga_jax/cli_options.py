@@ -14,7 +14,7 @@ from .results import ConfigError
 CACHE_ENV = "NSGA_JAX_CACHE"
 
 
-class _Parser(argparse.ArgumentParser):
+class OneLineErrorParser(argparse.ArgumentParser):
     """argparse with one-line errors (``error: ...``, exit 2) instead of a
     usage block."""
 
@@ -22,16 +22,16 @@ class _Parser(argparse.ArgumentParser):
         raise ConfigError(f"{self.prog}: {message} (see {self.prog} --help)")
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="nsga-jax", description=__doc__)
+def command_parser() -> argparse.ArgumentParser:
+    p = OneLineErrorParser(prog="nsga-jax", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     cached = argparse.ArgumentParser(add_help=False)
     cached.add_argument("--no-cache", action="store_true",
                         help="compile afresh and keep nothing on disk (default: compiled programs are kept in "
                              f"${CACHE_ENV} or ~/.cache/nsga_jax/xla, and a later run of the same scene structure, "
                              "with any h and parameter values, loads them instead of compiling)")
-    # typeshed wants parents of the subparsers' own class (_Parser); argparse copies any parser's arguments
-    parents = cast(list[_Parser], [cached])
+    # typeshed wants parents of the subparsers' own class (OneLineErrorParser); argparse copies any parser's arguments
+    parents = cast(list[OneLineErrorParser], [cached])
 
     run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=parents)
     run.add_argument("scene", help="scene name (see `nsga-jax scenes`), a .toml config, or a .py file that registers "

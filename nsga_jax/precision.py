@@ -38,7 +38,7 @@ def precision(dtype: str):
 _Tree = TypeVar("_Tree")
 
 
-def _cast(tree: _Tree, dtype: str) -> _Tree:
+def cast_floats(tree: _Tree, dtype: str) -> _Tree:
     """Every floating-point leaf of ``tree`` (arrays and NumPy scalars) as ``dtype``."""
 
     def cast(x):

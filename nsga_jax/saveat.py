@@ -41,7 +41,7 @@ class SaveAt(eqx.Module):
             ``jax.grad``. Only :func:`~nsga_jax.integrate` honours it.
         chunks: a folder into which :func:`~nsga_jax.simulate` writes each
             finished chunk of steps, every step in full, as
-            ``chunk_XXXXX.npz`` (:func:`nsga_jax.output.load_chunks` reads them
+            ``chunk_XXXXX.npz`` (:func:`nsga_jax.chunks.load_chunks` reads them
             back), so an interrupted run loses nothing already computed. Only
             the host driver honours it.
 

@@ -38,7 +38,7 @@ from .distributed import agree
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
 from .metrics import relative_l1_error
 from .monitors import RunTotals
-from .precision import _cast, precision
+from .precision import cast_floats, precision
 from .results import ConfigError
 from .scenes.base import configure
 from .solution import Solution, float64_view
@@ -104,7 +104,7 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
     with precision(first.solver["dtype"]):
         dtype = first.solver["dtype"]
         model = stack_models([s.model for s in scenes])
-        model, scheme = _cast((model, first.scheme()), dtype)
+        model, scheme = cast_floats((model, first.scheme()), dtype)
         q0 = np.stack([s.q0 for s in scenes]).astype(dtype)
         v0 = np.stack([s.v0 for s in scenes]).astype(dtype)
         run = BatchRun(model, scheme, 0.0, q0, v0, hs.astype(dtype), n_steps, mesh=mesh)

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nsga_jax.chunks import load_chunks
 from nsga_jax.cli import main
-from nsga_jax.output import load_chunks
 from nsga_jax.scenes import REGISTRY, load_scene
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"

@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from nsga_jax.cli import EXIT_INPUT, _parser, main
+from nsga_jax.cli import EXIT_INPUT, command_parser, main
 
 MALFORMED = ("abc", "-1", "nan", "1e999", "")
 """Values tried on every option that takes one (those an option legitimately
@@ -31,7 +31,7 @@ EXCLUSIVE = {"--ref-h": "--ref", "--ref": "--ref-h", "--data": "--synthetic"}
 
 
 def subcommands() -> dict[str, argparse.ArgumentParser]:
-    sub = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    sub = next(a for a in command_parser()._actions if isinstance(a, argparse._SubParsersAction))
     return dict(sub.choices)
 
 

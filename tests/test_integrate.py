@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.output import load_chunks
+from nsga_jax.chunks import load_chunks
 from nsga_jax.scenes import load_scene, parametrize
 
 BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
+from nsga_jax.chunks import load_chunks
 from nsga_jax.cli import main
-from nsga_jax.output import load_chunks
 from nsga_jax.scenes import load_scene
 
 # ------------------------------------------------------------ strided records

@@ -198,10 +198,10 @@ def test_the_pages_show_commands():
 
 @pytest.mark.parametrize("page, words", COMMANDS, ids=[f"{p}: nsga-jax {' '.join(w)}"[:100] for p, w in COMMANDS])
 def test_command_parses_with_the_current_options(page, words):
-    from nsga_jax.cli import _parser
+    from nsga_jax.cli import command_parser
     from nsga_jax.scenes import load_scene, parse_override
 
-    args = _parser().parse_args(words)  # an unknown option exits with status 2
+    args = command_parser().parse_args(words)  # an unknown option exits with status 2
     scene = getattr(args, "scene", None)
     if scene is None or args.command == "config":
         return

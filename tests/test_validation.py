@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-import nsga_jax._simulate as simulate_module
 from nsga_jax.scenes import REGISTRY, load_scene
+from nsga_jax.validation import check_model_fields
 
 pytestmark = pytest.mark.usefixtures("no_compilation")  # (tests/conftest.py)
 
@@ -173,20 +173,20 @@ def test_model_fields_of_every_scene_are_checked():
     for name in REGISTRY:
         scene = load_scene(name)
         model = scene.model
-        simulate_module.validate_model(model)
+        check_model_fields(model)
         assert model.ranges, f"{type(model).__name__} declares no ranges"
         for field, rng in model.ranges.items():
             bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
             value = np.full_like(np.asarray(getattr(model, field)), bad)
             broken = eqx.tree_at(lambda m, f=field: getattr(m, f), model, value)
             with pytest.raises(nj.ConfigError, match=rf"{type(model).__name__}.{field} must be in"):
-                simulate_module.validate_model(broken)
+                check_model_fields(broken)
 
 
 def test_rigid_body_inertia_must_be_positive_definite():
     box = load_scene("rigid_box").model
     broken = eqx.tree_at(lambda m: m.inertia, box, np.diag([1.0, -1.0, 1.0]))
-    refused(r"inertia must be positive definite", simulate_module.validate_model, broken)
+    refused(r"inertia must be positive definite", check_model_fields, broken)
 
 
 @pytest.mark.parametrize(

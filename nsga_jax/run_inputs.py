@@ -1,0 +1,81 @@
+"""The inputs of a run, checked before anything is traced: the scheme, the
+model instance and the initial state. Each refusal names the argument, the
+value and what is allowed (:class:`TypeError` for a wrong Python type,
+:class:`~nsga_jax.ConfigError` for a bad value); the field checks they use
+are :mod:`nsga_jax.validation`'s."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .integrators.base import AbstractScheme
+from .models.base import Model
+from .results import ConfigError
+from .validation import check_model_fields, describe, integer, real, require_instance
+
+
+def check_scheme(scheme) -> None:
+    """A scheme instance with tolerances in (0, inf), an integer iteration cap
+    >= 1 and its own settings in their ranges (concrete values only: traced
+    settings are checked where they were made)."""
+    require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
+    integer("max_iter", scheme.max_iter, 1)
+    settings = {"tol_r": (scheme.tol_r, 0.0, math.inf), "tol_f": (scheme.tol_f, 0.0, math.inf), **scheme.bounds()}
+    for name, (value, lo, hi) in settings.items():
+        if isinstance(value, jax.core.Tracer):
+            continue
+        x = float(np.asarray(value))
+        if name in ("tol_r", "tol_f"):
+            real(name, x, 0.0, lo_open=True)
+        elif not (math.isfinite(x) and lo <= x <= hi):
+            raise ConfigError(f"{name} must be in [{lo:g}, {hi:g}], got {x}")
+
+
+def state_vector(name: str, value: Any, n: int) -> np.ndarray:
+    """``q0`` or ``v0`` as a float64 vector of shape (n,): numbers only
+    (:class:`TypeError` otherwise), finite, of the model's size."""
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} must be an array of {n} numbers, got {describe(value)}")
+    try:
+        x = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be an array of {n} numbers, got {describe(value)}") from None
+    x = x.reshape(-1) if x.ndim else x.reshape(1)
+    if x.shape != (n,):
+        raise ConfigError(f"{name} must have shape ({n},), got {np.shape(value)}")
+    if not np.all(np.isfinite(x)):
+        bad = np.nonzero(~np.isfinite(x))[0]
+        raise ConfigError(f"{name} must be finite; non-finite entries at indices {bad.tolist()}")
+    return x
+
+
+def check_initial_state(model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9) -> None:
+    """Bilateral constraints satisfied and no penetration at t0."""
+    scale = max(1.0, float(np.abs(q0).max(initial=0.0)))
+    if model.n_unilateral:
+        gap = np.asarray(model.unilateral(jnp.asarray(q0)))
+        if not np.all(np.isfinite(gap)):
+            raise ConfigError("the initial gaps are not finite")
+        bad = np.nonzero(gap < -tol * scale)[0]
+        if bad.size:
+            j = int(bad[0])
+            raise ConfigError(f"initial penetration: gap {j} is {gap[j]:.6g} m at t0; every gap must be >= 0 "
+                              "(move the body out of the obstacle)")
+    if model.n_bilateral:
+        g = np.asarray(model.bilateral(jnp.asarray(q0)))
+        bad = np.nonzero(~(np.abs(g) <= 1e3 * tol * scale))[0]
+        if bad.size:
+            j = int(bad[0])
+            raise ConfigError(f"the initial position violates bilateral constraint {j} (g = {g[j]:.6g}); "
+                              "start from a configuration that satisfies the joints")
+
+
+def check_model_instance(model) -> None:
+    """A model instance whose fields pass :func:`check_model_fields`."""
+    require_instance("model", model, Model, "a model instance (a subclass of nsga_jax.Model)")
+    check_model_fields(model)

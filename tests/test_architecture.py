@@ -1,0 +1,134 @@
+"""The layering of docs/architecture.md, enforced on the source: a module may
+import its own layer and the layers below it, never one above, so that the
+numerical core never depends on the command line, scenes, files or plots.
+Imports inside functions count; imports under ``if TYPE_CHECKING:`` (type
+annotations only) do not. Every module must be placed in a layer."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "nsga_jax"
+
+LAYERS: list[tuple[str, set[str]]] = [
+    # (layer, top-level modules or subpackages of nsga_jax), from the bottom up
+    ("foundation", {"_custom_types", "_util", "results", "validation", "precision", "compilation_cache"}),
+    ("physics", {"elements", "assembly", "models", "exact"}),
+    ("numerics", {"integrators", "adjoint", "impact_time"}),
+    ("runs", {"saveat", "_integrate", "_simulate", "solution", "monitors", "diagnosis", "batch", "distributed",
+              "run_inputs", "chunks"}),
+    ("application", {"scenes", "cli", "cli_options", "bench", "sweep", "grid", "identify", "data", "studies",
+                     "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
+    ("package", {"__init__"}),
+]
+LEVEL = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}
+NAME = {i: name for i, (name, _) in enumerate(LAYERS)}
+
+
+def unit_of(module: str) -> str:
+    """``nsga_jax.integrators.ds`` -> ``integrators``; ``nsga_jax`` -> ``__init__``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _under_type_checking(node: ast.AST, parents: dict[ast.AST, ast.AST]) -> bool:
+    while node in parents:
+        node = parents[node]
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            return True
+    return False
+
+
+def imports_of(source: str, module: str, is_package: bool = False) -> list[tuple[int, str]]:
+    """(line, absolute nsga_jax module) for every import of the package in the
+    ``source`` of ``module`` (``is_package``: the source is its ``__init__``)."""
+    tree = ast.parse(source)
+    parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+    here = module.split(".")
+    package = here if is_package else here[:-1]
+    found = []
+    for node in ast.walk(tree):
+        if _under_type_checking(node, parents):
+            continue
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+                names = [target] if node.module else [f"{target}.{a.name}" for a in node.names]
+            else:
+                names = [node.module or ""]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        else:
+            continue
+        found += [(node.lineno, n) for n in names if n == "nsga_jax" or n.startswith("nsga_jax.")]
+    return found
+
+
+SOURCES = sorted(PACKAGE.rglob("*.py"))
+
+
+def test_every_module_has_a_layer():
+    unplaced = sorted({unit_of(module_name(p)) for p in SOURCES} - set(LEVEL))
+    assert not unplaced, f"place these in a layer of tests/test_architecture.py and docs/architecture.md: {unplaced}"
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_no_module_imports_a_layer_above_its_own(path):
+    own = LEVEL[unit_of(module_name(path))]
+    upward = [f"line {line}: {target} ({NAME[LEVEL[unit_of(target)]]})"
+              for line, target in imports_of(path.read_text(), module_name(path), path.name == "__init__.py")
+              if LEVEL.get(unit_of(target), -1) > own]
+    assert not upward, f"{path.relative_to(PACKAGE)} ({NAME[own]}) imports from a layer above: {upward}"
+
+
+def test_the_checker_sees_upward_imports():
+    """The checker itself: a lazy import of the command line from inside a
+    function of the numerics is found, and one under TYPE_CHECKING is not."""
+    source = ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from ..solution import Solution\n"
+              "def f():\n    from ..cli import main\n    return main\n")
+    found = imports_of(source, "nsga_jax.integrators.probe")
+    assert found == [(5, "nsga_jax.cli")]
+    assert LEVEL[unit_of("nsga_jax.cli")] > LEVEL[unit_of("nsga_jax.integrators.probe")]
+    assert imports_of("from . import results\n", "nsga_jax", is_package=True) == [(1, "nsga_jax.results")]
+
+
+def private_names_imported(source: str, module: str, is_package: bool = False) -> list[str]:
+    """``module.name`` for every ``from nsga_jax.module import _name`` where
+    ``_name`` is a private name of another module (not a module itself)."""
+    found = []
+    here = module.split(".")
+    package = here if is_package else here[:-1]
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.ImportFrom) or node.module == "__future__":
+            continue
+        base = ".".join(package[: len(package) - node.level + 1] + ([node.module] if node.module else [])) \
+            if node.level else (node.module or "")
+        if not base.startswith("nsga_jax"):
+            continue
+        for alias in node.names:
+            target = PACKAGE.parent.joinpath(*base.split("."), alias.name)
+            is_module = target.with_suffix(".py").exists() or (target / "__init__.py").exists()
+            if alias.name.startswith("_") and not is_module:
+                found.append(f"{base}.{alias.name}")
+    return found
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_no_module_imports_another_modules_private_names(path):
+    private = private_names_imported(path.read_text(), module_name(path), path.name == "__init__.py")
+    assert not private, f"{path.relative_to(PACKAGE)} imports private names: {private}"
+
+
+def test_the_private_name_checker_sees_them():
+    assert private_names_imported("from ..precision import _hidden, precision\n", "nsga_jax.integrators.ds") == [
+        "nsga_jax.precision._hidden"]
+    assert private_names_imported("from . import _custom_types\n", "nsga_jax.solution") == []
