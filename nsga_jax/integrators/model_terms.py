@@ -191,7 +191,8 @@ class BandedLinearForce(AbstractForce):
 
     Attributes:
         K, C, K_norm, C_norm: as :class:`LinearForce`.
-        K_band, C_band: the 2b + 1 diagonals of K and C, shape (2b + 1, n).
+        K_band, C_band: the 2b + 1 diagonals of K and C, shape (2b + 1, n)
+            (C's only for a velocity-dependent force, else ``None``).
         velocity_dependent: whether C enters the differences (static).
     """
 
@@ -200,7 +201,7 @@ class BandedLinearForce(AbstractForce):
     K_norm: Scalar
     C_norm: Scalar
     K_band: jax.Array
-    C_band: jax.Array
+    C_band: jax.Array | None
     velocity_dependent: bool = eqx.field(static=True)
     is_constant: ClassVar[bool] = True
 
@@ -213,6 +214,7 @@ class BandedLinearForce(AbstractForce):
     def change(self, model: Model, ref: ForceAt, q: Vector, v: Vector, t: Scalar) -> Vector:
         df = -band_product(self.K_band, q - ref.q)
         if self.velocity_dependent:
+            assert self.C_band is not None  # kept for a velocity-dependent force
             df = df - band_product(self.C_band, v - ref.v)
         return df
 

@@ -145,7 +145,8 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
             C = jnp.zeros_like(K)
         K_norm, C_norm = jnp.linalg.norm(K), jnp.linalg.norm(C)
         force = (LinearForce(K, C, K_norm, C_norm) if b is None else
-                 BandedLinearForce(K, C, K_norm, C_norm, band_matrix(K, b), band_matrix(C, b),
+                 BandedLinearForce(K, C, K_norm, C_norm, band_matrix(K, b),
+                                   band_matrix(C, b) if model.velocity_dependent_force else None,
                                    model.velocity_dependent_force))
     constraints: AbstractConstraintJacobian = VaryingJacobian()
     if model.linear_constraints and nc > 0:
