@@ -26,8 +26,9 @@ import os
 import platform
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
+
+from compare_revisions import revision_trees  # the script next to this one
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -77,27 +78,14 @@ def main() -> None:
     args = parser.parse_args(argv)
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.head or "HEAD"],
                             capture_output=True, text=True, check=True).stdout.strip()
-    with tempfile.TemporaryDirectory(prefix="nsga_jax_bench_") as tmp:
-        trees = {}
-        for label, rev in (("base", args.base), ("head", args.head)):
-            if rev is None:
-                trees[label] = ROOT
-                continue
-            trees[label] = Path(tmp) / label
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(trees[label]), rev],
-                           check=True)
-        try:
-            runs: dict[str, list[list[dict]]] = {"base": [], "head": []}
-            for i in range(args.pairs):
-                for label in ("base", "head"):
-                    rows = bench(trees[label], bench_args, Path(tmp) / f"{label}{i}")
-                    runs[label].append(rows)
-                    print(label, i, " | ".join(f"{r['scene']} {r['dtype']} b{r['batch']}: {r['us_per_step']:.1f} µs"
-                                               for r in rows), flush=True)
-        finally:
-            for label, tree in trees.items():
-                if tree != ROOT:
-                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+    with revision_trees(args.base, args.head, "nsga_jax_bench_") as (trees, tmp):
+        runs: dict[str, list[list[dict]]] = {"base": [], "head": []}
+        for i in range(args.pairs):
+            for label in ("base", "head"):
+                rows = bench(trees[label], bench_args, tmp / f"{label}{i}")
+                runs[label].append(rows)
+                print(label, i, " | ".join(f"{r['scene']} {r['dtype']} b{r['batch']}: {r['us_per_step']:.1f} µs"
+                                           for r in rows), flush=True)
     keys = [tuple(r[k] for k in KEY) for r in runs["base"][0]]
     lines = [f"`compare_bench.py {args.base} {args.head or commit + ' (working tree)'} --pairs {args.pairs} -- "
              f"{' '.join(bench_args)}`, {datetime.date.today()}, {platform.node()} ({os.cpu_count()} CPUs); "

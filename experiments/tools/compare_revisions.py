@@ -26,11 +26,13 @@ a user of this machine gets. Report both when they disagree.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -60,6 +62,28 @@ print(json.dumps(row))
 """
 
 
+
+@contextlib.contextmanager
+def revision_trees(base: str, head: str | None, prefix: str) -> Iterator[tuple[dict[str, Path], Path]]:
+    """``({"base": tree, "head": tree}, tmp)``: each revision checked out into a
+    temporary worktree (``head=None``: the working tree itself) inside the
+    temporary folder ``tmp``; the worktrees are removed on exit."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        trees: dict[str, Path] = {}
+        try:
+            for label, rev in (("base", base), ("head", head)):
+                if rev is None:
+                    trees[label] = ROOT
+                    continue
+                trees[label] = Path(tmp) / label
+                subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(trees[label]),
+                                rev], check=True)
+            yield trees, Path(tmp)
+        finally:
+            for tree in trees.values():
+                if tree != ROOT:
+                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+
 def measure(tree: Path, scene: str, batch: int, cpus: int | None = None) -> dict:
     pin = None if cpus is None else (lambda: os.sched_setaffinity(0, sorted(os.sched_getaffinity(0))[:cpus]))
     out = subprocess.run([sys.executable, "-c", MEASURE, str(tree), scene, str(batch)], check=True,
@@ -79,30 +103,17 @@ def main() -> None:
     args = parser.parse_args()
     if args.cpus is not None and not 1 <= args.cpus <= len(os.sched_getaffinity(0)):
         parser.error(f"--cpus must be in [1, {len(os.sched_getaffinity(0))}], got {args.cpus}")
-    with tempfile.TemporaryDirectory(prefix="nsga_jax_revisions_") as tmp:
-        trees = {}
-        for label, rev in (("base", args.base), ("head", args.head)):
-            if rev is None:
-                trees[label] = ROOT
-                continue
-            trees[label] = Path(tmp) / label
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(trees[label]), rev],
-                           check=True)
-        try:
-            rows = {"base": [], "head": []}
-            for _ in range(args.pairs):
-                for label in ("base", "head"):
-                    row = measure(trees[label], args.scene, args.batch, args.cpus)
-                    rows[label].append(row)
-                    print(label, " ".join(f"{k} {v:.2f}" for k, v in row.items()), flush=True)
-            for label, rs in rows.items():
-                print(f"{label} ({args.base if label == 'base' else args.head or 'working tree'}): min",
-                      " ".join(f"{k} {min(r[k] for r in rs):.2f}" for k in rs[0]),
-                      "| max", " ".join(f"{k} {max(r[k] for r in rs):.2f}" for k in rs[0]))
-        finally:
-            for label, tree in trees.items():
-                if tree != ROOT:
-                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+    with revision_trees(args.base, args.head, "nsga_jax_revisions_") as (trees, _):
+        rows: dict[str, list[dict]] = {"base": [], "head": []}
+        for _ in range(args.pairs):
+            for label in ("base", "head"):
+                row = measure(trees[label], args.scene, args.batch, args.cpus)
+                rows[label].append(row)
+                print(label, " ".join(f"{k} {v:.2f}" for k, v in row.items()), flush=True)
+    for label, rs in rows.items():
+        print(f"{label} ({args.base if label == 'base' else args.head or 'working tree'}): min",
+              " ".join(f"{k} {min(r[k] for r in rs):.2f}" for k in rs[0]),
+              "| max", " ".join(f"{k} {max(r[k] for r in rs):.2f}" for k in rs[0]))
 
 
 if __name__ == "__main__":
