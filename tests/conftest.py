@@ -94,6 +94,7 @@ LONG = {
     "test_event_gradients.py::test_other_schemes_event_gradient[MJ]",
     "test_check_model.py::test_built_in_models_keep_their_declarations[flexible_cube]",
     "test_integrate.py::test_saveat_fn_keeps_what_a_loss_needs_under_grad",
+    "test_integrate.py::test_integrate_with_members_sharded_over_two_devices",
     "test_gradients.py::test_vmap_of_grad_equals_grad",
     "test_gradients.py::test_reverse_equals_forward",
     "test_readme.py::test_example_runs_as_written[docs/python-api.md: Output control: `SaveAt`]",

@@ -141,3 +141,45 @@ def test_simulate_batch_returns_one_solution_per_step_size():
     single = nj.simulate(BALL, nj.DS(), 0.0, 1.0, 2e-3, [1.0], [0.0])
     np.testing.assert_allclose(sols[1].q, single.q, rtol=0, atol=1e-12)
     assert sols[1].stats["iterations"] == single.stats["iterations"]
+
+
+SHARDED = """
+import jax, jax.numpy as jnp, numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+import nsga_jax as nj
+assert len(jax.devices()) == 2
+ball = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+h0 = jnp.asarray([0.3, 0.5, 0.7, 0.9])
+q0 = h0[:, None]  # the ball's one coordinate: its height [m]
+v0 = jnp.zeros_like(q0)
+
+def final_height(q0, v0):
+    sol = nj.integrate(ball, nj.DS(), 0.0, 0.6, 1e-3, q0, v0)
+    return sol.q[-1, -1], sol.stats["failed_steps"]
+
+run = jax.jit(jax.vmap(final_height))
+mesh = Mesh(np.array(jax.devices()), ("members",))
+spread = NamedSharding(mesh, P("members"))
+sharded = run(jax.device_put(q0, spread), jax.device_put(v0, spread))
+assert len(sharded[0].sharding.device_set) == 2, sharded[0].sharding
+single = [final_height(q0[i], v0[i]) for i in range(4)]
+np.testing.assert_allclose(np.asarray(sharded[0]), [float(s[0]) for s in single], rtol=0, atol=1e-12)
+assert int(np.sum(sharded[1])) == 0
+print("ok", np.asarray(sharded[0]).tolist())
+"""
+
+
+def test_integrate_with_members_sharded_over_two_devices():
+    """The pure entry point under vmap with the members split over two CPU
+    devices (a separate process: the device count is fixed at start-up)
+    equals member-by-member runs."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(SHARDED)], env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.startswith("ok")
