@@ -221,15 +221,18 @@ class InvariantWarning(UserWarning):
     wrong there."""
 
 
+def _energies(model: Model, q: jax.Array, v: jax.Array) -> jax.Array:
+    """Total energy [J] and kinetic energy 1/2 v·M v [J] after each step of a
+    chunk: q, v (steps, n) -> (steps, 2)."""
+    return jax.vmap(lambda qi, vi: jnp.stack([model.energy(qi, vi), 0.5 * vi @ model.mass_product(qi, vi)]))(q, v)
+
+
+_energies_jit = eqx.filter_jit(_energies)  # one function for every run: later runs reuse its compilation
+
+
 def _energy_of(model: Model):
-    """``(q, v) -> energies`` over a chunk's steps (jitted), or ``None``."""
-    if not model.has_energy:
-        return None
-
-    def energies(m, q, v):  # total energy [J] and kinetic energy 1/2 v·M v [J] after each step
-        return jax.vmap(lambda qi, vi: jnp.stack([m.energy(qi, vi), 0.5 * vi @ m.mass_product(qi, vi)]))(q, v)
-
-    return eqx.filter_jit(energies)
+    """The jitted :func:`_energies` for a model that has an energy, else ``None``."""
+    return _energies_jit if model.has_energy else None
 
 
 def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk,

@@ -73,23 +73,29 @@ def test_generic_path_keeps_nothing_constant():
 
 
 def test_no_recompilation_when_only_h_or_parameters_change():
+    """Later runs with another h, E, e, v0 or step count compile none of the
+    simulation's programs: every backend compile they trigger is far shorter
+    than the first run's (scene building and observables may compile tiny
+    eager ops for new shapes, in milliseconds; the bar's chunk program takes
+    seconds). Measured against the first run, not a fixed bound, so that a
+    loaded machine slows both alike."""
     compiles = []
 
     def listen(event, duration, **kwargs):
-        # the simulation's programs take seconds to compile; scene building and
-        # observables may compile tiny eager ops for new shapes (milliseconds)
-        if event == "/jax/core/compile/backend_compile_duration" and duration > 0.5:
+        if event == "/jax/core/compile/backend_compile_duration":
             compiles.append(duration)
 
-    load_scene("impacting_bar", {"t_end": 0.2}).run()
     jax.monitoring.register_event_duration_secs_listener(listen)
     try:
+        first = load_scene("impacting_bar", {"t_end": 0.2}).run()
+        first_compile = max(compiles)
+        compiles.clear()
         for overrides in ({"h": 1.3e-3}, {"E": 700.0, "e": 0.5, "velocity": 8.0}, {"h": 7e-4, "t_end": 0.3}):
-            sol = load_scene("impacting_bar", {"t_end": 0.2, **overrides}).run()
-            assert sol.compile_time < 0.5
+            load_scene("impacting_bar", {"t_end": 0.2, **overrides}).run()
     finally:
         jax.monitoring.unregister_event_duration_listener(listen)
-    assert compiles == []
+    assert first.compile_time >= first_compile > 0.0
+    assert max(compiles, default=0.0) < 0.1 * first_compile, (first_compile, sorted(compiles)[-3:])
 
 
 def test_bench_writes_its_table(tmp_path):
