@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -61,6 +61,30 @@ def interval_text(lo: float, hi: float, lo_open: bool, hi_open: bool) -> str:
     low = "-inf" if lo == -math.inf else f"{lo:g}"
     high = "inf" if hi == math.inf else f"{hi:g}"
     return f"{left}{low}, {high}{right}"
+
+
+class Range(NamedTuple):
+    """A field's allowed interval; ``lo_open``/``hi_open`` exclude the bound.
+    The declarative form of :func:`real`'s bounds, for model fields
+    (``Model.ranges``) and scene parameters."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def contains(self, x) -> bool:
+        x = np.asarray(x)
+        above = x > self.lo if self.lo_open else x >= self.lo
+        below = x < self.hi if self.hi_open else x <= self.hi
+        return bool(np.all(above & below))
+
+    def text(self) -> str:
+        return interval_text(self.lo, self.hi, self.lo_open, self.hi_open)
+
+
+POSITIVE = Range(0.0, math.inf, lo_open=True)
+UNIT_INTERVAL = Range(0.0, 1.0)
 
 
 def real(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf, *, lo_open: bool = False,
@@ -179,8 +203,8 @@ def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 
             "--record-every) or shorten the run")
 
 
-__all__ = ["MAX_STEPS", "check_memory", "choice", "describe", "integer", "real", "require_instance",
-           "step_count", "time_grid"]
+__all__ = ["MAX_STEPS", "POSITIVE", "UNIT_INTERVAL", "Range", "check_memory", "check_model_fields", "choice",
+           "describe", "integer", "interval_text", "real", "require_instance", "step_count", "time_grid"]
 
 
 # ----------------------------------------------------------- models, schemes

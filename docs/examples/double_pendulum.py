@@ -65,9 +65,9 @@ import jax
 import jax.numpy as jnp
 
 import nsga_jax
-from nsga_jax.models.base import POSITIVE, UNIT_INTERVAL, Range
 from nsga_jax.scenes import Param, SceneSpec
 from nsga_jax.scenes.base import register
+from nsga_jax.validation import POSITIVE, UNIT_INTERVAL, Range
 
 
 def as_float(x) -> jax.Array:

@@ -11,7 +11,8 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
-from .base import POSITIVE, UNIT_INTERVAL, Model, count_rule
+from ..validation import POSITIVE, UNIT_INTERVAL
+from .base import Model, count_rule
 
 
 class ElasticBar(Model):

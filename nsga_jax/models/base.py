@@ -21,8 +21,7 @@ internal + damping + complementary inertia); its tangents are
 from __future__ import annotations
 
 import abc
-import math
-from typing import ClassVar, NamedTuple
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -30,29 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
-
-
-class Range(NamedTuple):
-    """A field's allowed interval; ``lo_open``/``hi_open`` exclude the bound."""
-
-    lo: float = -math.inf
-    hi: float = math.inf
-    lo_open: bool = False
-    hi_open: bool = False
-
-    def contains(self, x) -> bool:
-        x = np.asarray(x)
-        above = x > self.lo if self.lo_open else x >= self.lo
-        below = x < self.hi if self.hi_open else x <= self.hi
-        return bool(np.all(above & below))
-
-    def text(self) -> str:
-        left = "(" if self.lo_open or self.lo == -math.inf else "["
-        right = ")" if self.hi_open or self.hi == math.inf else "]"
-        return f"{left}{self.lo:g}, {self.hi:g}{right}"
-
-
-POSITIVE = Range(0.0, math.inf, lo_open=True)
+from ..validation import Range
 
 
 def side_rule(side) -> str | None:
@@ -69,7 +46,6 @@ def count_rule(name: str, value, lo: int = 1) -> str | None:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
         return f"{name} must be an integer >= {lo}, got {value!r}"
     return None
-UNIT_INTERVAL = Range(0.0, 1.0)
 
 
 class Model(eqx.Module):

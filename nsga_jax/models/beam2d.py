@@ -12,7 +12,8 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.beam2d import beam_energy, beam_internal_force, beam_mass
-from .base import POSITIVE, UNIT_INTERVAL, Model, Range, count_rule, side_rule
+from ..validation import POSITIVE, UNIT_INTERVAL, Range
+from .base import Model, count_rule, side_rule
 
 
 class PlanarBeam(Model):

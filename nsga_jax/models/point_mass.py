@@ -8,7 +8,8 @@ import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
-from .base import POSITIVE, UNIT_INTERVAL, Model, side_rule
+from ..validation import POSITIVE, UNIT_INTERVAL
+from .base import Model, side_rule
 
 
 class BouncingBall(Model):

@@ -16,7 +16,8 @@ from ..elements.rigid_body import (
     point_heights,
     rigidity_constraints,
 )
-from .base import POSITIVE, UNIT_INTERVAL, Model
+from ..validation import POSITIVE, UNIT_INTERVAL
+from .base import Model
 
 
 class RigidBody(Model):

@@ -11,7 +11,8 @@ from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
 from ..elements.hex8 import hex8_body_force, hex8_geometry, hex8_internal_force, hex8_mass, lame, svk_energy
-from .base import POSITIVE, UNIT_INTERVAL, Model, Range
+from ..validation import POSITIVE, UNIT_INTERVAL, Range
+from .base import Model
 
 
 class HexSolid(Model):

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..results import ConfigError
-from ..validation import time_grid
+from ..validation import Range, time_grid
 
 
 @dataclass(frozen=True)
@@ -35,14 +35,15 @@ class Param:
     choices: tuple[str, ...] = ()
     note: str = ""
 
+    @property
+    def range(self) -> Range:
+        """The allowed interval of a float or int field."""
+        return Range(self.lo, self.hi, self.lo_open, self.hi_open)
+
     def range_text(self) -> str:
         if self.kind == "choice":
             return "one of " + ", ".join(repr(c) for c in self.choices)
-        left = "(" if self.lo_open or self.lo == -math.inf else "["
-        right = ")" if self.hi_open or self.hi == math.inf else "]"
-        lo = "-inf" if self.lo == -math.inf else f"{self.lo:g}"
-        hi = "inf" if self.hi == math.inf else f"{self.hi:g}"
-        return f"{left}{lo}, {hi}{right}"
+        return self.range.text()
 
     def check(self, name: str, value: Any) -> Any:
         """Return the value converted to its kind, or raise :class:`ConfigError`."""
@@ -63,9 +64,7 @@ class Param:
             if x != int(x):
                 raise ConfigError(f"{name} must be an integer in {self.range_text()}, got {value!r}")
             x = int(x)
-        too_low = x < self.lo or (self.lo_open and x == self.lo)
-        too_high = x > self.hi or (self.hi_open and x == self.hi)
-        if too_low or too_high:
+        if not self.range.contains(x):
             note = f" ({self.note})" if self.note else ""
             raise ConfigError(f"{name}{unit} must be in {self.range_text()}{note}, got {value!r}")
         return x
