@@ -67,7 +67,10 @@ def __getattr__(name: str):
     elif name in _MODULES:
         value = importlib.import_module(f".{name}", __name__)
     elif name == "SCHEMES":
-        value = {"ds": __getattr__("DS"), "dsn": __getattr__("DSn"), "cs": __getattr__("CS"), "mj": __getattr__("MJ")}
+        from .integrators import scheme_class
+        from .validation import SCHEME_NAMES
+
+        value = {name: scheme_class(name) for name in SCHEME_NAMES}
     else:
         raise AttributeError(f"module 'nsga_jax' has no attribute {name!r}")
     globals()[name] = value

@@ -109,17 +109,18 @@ def _step_sizes(text: str) -> list[float]:
 def _convergence(args) -> int:
     from .folders import writable_folder
     from .scenes import load_scene, parse_override
-    from .validation import real
+    from .validation import SCHEME_NAMES, real
 
     overrides = dict(parse_override(s) for s in args.set)
     if args.t_end is not None:
         overrides["t_end"] = args.t_end
     schemes = [s.strip() for s in args.scheme.split(",") if s.strip()]
     if not schemes:
-        raise ConfigError(f"--scheme expects comma-separated schemes (ds, dsn, cs, mj), got {args.scheme!r}")
+        raise ConfigError(f"--scheme expects comma-separated schemes ({', '.join(SCHEME_NAMES)}), "
+                          f"got {args.scheme!r}")
     for s in schemes + [args.ref_scheme]:
-        if s not in ("ds", "dsn", "cs", "mj"):
-            raise ConfigError(f"scheme must be one of ds, dsn, cs, mj, got {s!r}")
+        if s not in SCHEME_NAMES:
+            raise ConfigError(f"scheme must be one of {', '.join(SCHEME_NAMES)}, got {s!r}")
     hs = _step_sizes(args.h)
     if args.ref_h is not None:
         real("--ref-h", args.ref_h, 0.0, lo_open=True, unit="s")

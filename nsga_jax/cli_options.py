@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import cast
 
 from .results import ConfigError
+from .validation import SCHEME_NAMES
 
 CACHE_ENV = "NSGA_JAX_CACHE"
 
@@ -39,7 +40,7 @@ def command_parser() -> argparse.ArgumentParser:
     run.add_argument("--h", type=float, help="step size [s]")
     run.add_argument("--t-end", type=float, help="end time [s]")
     run.add_argument("--rho-inf", type=float, help="spectral radius at infinity, in [0, 1]")
-    run.add_argument("--scheme", choices=("ds", "dsn", "cs", "mj"), help="time integration scheme")
+    run.add_argument("--scheme", choices=SCHEME_NAMES, help="time integration scheme")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a config key (repeatable), e.g. --set e=0.5")
     run.add_argument("--dtype", choices=("float64", "float32"), help="floating-point precision (default float64)")
@@ -126,7 +127,7 @@ def command_parser() -> argparse.ArgumentParser:
     bn.add_argument("--scenes", help="comma-separated scenes (default: all)")
     bn.add_argument("--batch", default="1,64,1024", help="comma-separated batch sizes (default 1,64,1024)")
     bn.add_argument("--dtype", default="float64,float32", help="comma-separated precisions")
-    bn.add_argument("--scheme", choices=("ds", "dsn", "cs", "mj"), default="ds")
+    bn.add_argument("--scheme", choices=SCHEME_NAMES, default="ds")
     bn.add_argument("--repeats", type=int, default=3, help="runs per configuration; the fastest counts")
     bn.add_argument("--max-steps", type=int, default=2000, help="steps per run at most (default 2000)")
     bn.add_argument("--max-seconds", type=float, default=60.0,

@@ -63,6 +63,10 @@ def interval_text(lo: float, hi: float, lo_open: bool, hi_open: bool) -> str:
     return f"{left}{low}, {high}{right}"
 
 
+SCHEME_NAMES = ("ds", "dsn", "cs", "mj")
+"""The schemes' names in configs, on the command line and in ``nsga_jax.SCHEMES``
+(:func:`nsga_jax.integrators.scheme_class` gives each class)."""
+
 class Range(NamedTuple):
     """A field's allowed interval; ``lo_open``/``hi_open`` exclude the bound.
     The declarative form of :func:`real`'s bounds, for model fields
@@ -203,8 +207,8 @@ def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 
             "--record-every) or shorten the run")
 
 
-__all__ = ["MAX_STEPS", "POSITIVE", "UNIT_INTERVAL", "Range", "check_memory", "check_model_fields", "choice",
-           "describe", "integer", "interval_text", "real", "require_instance", "step_count", "time_grid"]
+__all__ = ["MAX_STEPS", "POSITIVE", "SCHEME_NAMES", "UNIT_INTERVAL", "Range", "check_memory", "check_model_fields",
+           "choice", "describe", "integer", "interval_text", "real", "require_instance", "step_count", "time_grid"]
 
 
 # ----------------------------------------------------------- models, schemes

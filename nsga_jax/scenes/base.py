@@ -73,16 +73,12 @@ class Scene:
 
 def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
     """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter)."""
-    from ..integrators.cs import CS
-    from ..integrators.ds import DS, DSn
-    from ..integrators.mj import MJ
+    from ..integrators import scheme_class
 
     common = dict(tol_r=solver["tol_r"], tol_f=solver["tol_f"], max_iter=solver["max_iter"])
     name = solver["scheme"]
-    if name == "mj":
-        return MJ(theta=solver["theta"], **common)
-    cls = {"ds": DS, "dsn": DSn, "cs": CS}[name]
-    return cls(rho_inf=solver["rho_inf"], **common)
+    cls: Any = scheme_class(name)  # its own setting: MJ's theta, the generalized-α schemes' rho_inf
+    return cls(theta=solver["theta"], **common) if name == "mj" else cls(rho_inf=solver["rho_inf"], **common)
 
 
 Make = Callable[[dict[str, Any], dict[str, Any]], tuple["Model", Any, Any, Callable]]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..results import ConfigError
-from ..validation import Range, time_grid
+from ..validation import SCHEME_NAMES, Range, time_grid
 
 
 @dataclass(frozen=True)
@@ -84,7 +84,7 @@ def unit_interval(default, doc) -> Param:
 
 SOLVER_PARAMS: dict[str, Param] = {
     "scheme": Param("ds", "time integration scheme: decoupled (ds), decoupled without f^p and f* (dsn), "
-                    "coupled (cs), Moreau-Jean (mj)", kind="choice", choices=("ds", "dsn", "cs", "mj")),
+                    "coupled (cs), Moreau-Jean (mj)", kind="choice", choices=SCHEME_NAMES),
     "h": positive(1e-3, "step size", "s"),
     "t_end": positive(1.0, "end time (the run starts at t = 0)", "s"),
     "rho_inf": unit_interval(0.8, "spectral radius at infinity ρ∞ of generalized-α (eq. 35)"),
