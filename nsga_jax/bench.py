@@ -29,10 +29,10 @@ import numpy as np
 from .batch import BatchRun, broadcast_members
 from .compilation_cache import compilation_cache
 from .metrics import relative_l1_error
-from .precision import cast_floats, precision
+from .precision import DTYPES, cast_floats, precision
 from .results import ConfigError
 from .scenes.base import REGISTRY, Scene, load_scene
-from .validation import step_count
+from .validation import choice, integer, real, step_count
 
 CASES: dict[str, dict] = {
     "bouncing_ball": {"h": 1e-3},
@@ -170,16 +170,15 @@ def bench(
         if s not in REGISTRY:
             raise ConfigError(f"unknown scene {s!r}; built-in scenes: {', '.join(sorted(REGISTRY))}")
     for b in batches:
-        if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or b < 1:
-            raise ConfigError(f"batch sizes must be integers >= 1, got {b!r}")
+        try:
+            integer("batch", b, 1)
+        except ConfigError:
+            raise ConfigError(f"batch sizes must be integers >= 1, got {b!r}") from None
     for d in dtypes:
-        if d not in ("float64", "float32"):
-            raise ConfigError(f"dtype must be 'float64' or 'float32', got {d!r}")
+        choice("dtype", d, DTYPES)
     for name, value in (("repeats", repeats), ("max_steps", max_steps)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
-    if not max_seconds > 0:
-        raise ConfigError(f"max_seconds must be in (0, inf), got {max_seconds!r}")
+        integer(name, value, 1)
+    real("max_seconds", max_seconds, 0.0, lo_open=True)
     path = None
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)

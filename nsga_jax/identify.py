@@ -28,7 +28,7 @@ from .adjoint import ADJOINT_KINDS, AbstractAdjoint, ImpactTimeAdjoint
 from .data import Data
 from .results import ConfigError
 from .scenes.base import load_scene, make_scheme, parametrize
-from .validation import require_instance
+from .validation import integer, require_instance
 
 OPTIMIZERS = ("lbfgs", "adam")
 
@@ -148,8 +148,7 @@ def identify(
     """
     if optimizer not in OPTIMIZERS:
         raise ConfigError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got {optimizer!r}")
-    if max_steps < 1:
-        raise ConfigError(f"max_steps must be an integer >= 1, got {max_steps}")
+    integer("max_steps", max_steps, 1)
     require_instance("adjoint", adjoint, AbstractAdjoint, ADJOINT_KINDS)
     data.check()
     overrides = dict(overrides or {})

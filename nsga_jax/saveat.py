@@ -18,7 +18,7 @@ import equinox as eqx
 from .integrators.base import StepState
 from .integrators.records import StepOutput
 from .results import ConfigError
-from .validation import describe
+from .validation import describe, integer
 
 SaveFn = Callable[[StepState, StepOutput], Any]
 """``(state, record) -> pytree``: what :class:`SaveAt` keeps of each step."""
@@ -54,10 +54,10 @@ class SaveAt(eqx.Module):
     chunks: str | Path | None = eqx.field(default=None, static=True)
 
     def __check_init__(self):
-        if isinstance(self.every, bool) or not isinstance(self.every, int) or self.every < 1:
-            # the name users know from configurations and the command line, with the field
-            raise ConfigError(f"record_every must be an integer >= 1, got {describe(self.every)} "
-                              "(SaveAt.every: keep every k-th step and the last)")
+        try:  # the name users know from configurations and the command line, with the field
+            integer("record_every", self.every, 1)
+        except ConfigError as error:
+            raise ConfigError(f"{error} (SaveAt.every: keep every k-th step and the last)") from None
         if self.fn is not None and not callable(self.fn):
             raise TypeError(f"SaveAt.fn must be a function (state, record) -> pytree or None, "
                             f"got {describe(self.fn)}")

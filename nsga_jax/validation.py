@@ -118,7 +118,9 @@ def integer(name: str, value: Any, lo: int = 1, hi: int | None = None) -> int:
     (floats with a fractional part, booleans and strings are refused)."""
     allowed = f"an integer >= {lo}" + ("" if hi is None else f" and <= {hi}")
     ok = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-    if not ok or value < lo or (hi is not None and value > hi):
+    if not ok:  # name the type: True, 2.5 and "3" all look like counts
+        raise ConfigError(f"{name} must be {allowed}, got {describe(value)}")
+    if value < lo or (hi is not None and value > hi):
         raise ConfigError(f"{name} must be {allowed}, got {value!r}")
     return int(value)
 

@@ -105,7 +105,7 @@ def test_traced_times_need_n_steps():
 
 
 @pytest.mark.parametrize("kwargs, error, match", [
-    ({"every": 0}, nj.ConfigError, r"record_every must be an integer >= 1, got int 0 \(SaveAt.every"),
+    ({"every": 0}, nj.ConfigError, r"record_every must be an integer >= 1, got 0 \(SaveAt.every"),
     ({"every": True}, nj.ConfigError, r"record_every must be an integer >= 1, got bool True \(SaveAt.every"),
     ({"every": 2.5}, nj.ConfigError, r"record_every must be an integer >= 1, got float 2.5"),
     ({"fn": 3}, TypeError, r"SaveAt.fn must be a function \(state, record\) -> pytree or None, got int 3"),

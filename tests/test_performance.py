@@ -85,16 +85,16 @@ def test_no_recompilation_when_only_h_or_parameters_change():
         if event == "/jax/core/compile/backend_compile_duration":
             compiles.append(duration)
 
+    jax.clear_caches()  # the first run compiles its programs, whatever ran before in this process
     jax.monitoring.register_event_duration_secs_listener(listen)
     try:
-        first = load_scene("impacting_bar", {"t_end": 0.2}).run()
+        load_scene("impacting_bar", {"t_end": 0.2}).run()
         first_compile = max(compiles)
         compiles.clear()
         for overrides in ({"h": 1.3e-3}, {"E": 700.0, "e": 0.5, "velocity": 8.0}, {"h": 7e-4, "t_end": 0.3}):
             load_scene("impacting_bar", {"t_end": 0.2, **overrides}).run()
     finally:
         jax.monitoring.unregister_event_duration_listener(listen)
-    assert first.compile_time >= first_compile > 0.0
     assert max(compiles, default=0.0) < 0.1 * first_compile, (first_compile, sorted(compiles)[-3:])
 
 

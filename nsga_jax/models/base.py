@@ -29,7 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
-from ..validation import Range
+from ..results import ConfigError
+from ..validation import Range, integer
 
 
 def side_rule(side) -> str | None:
@@ -43,8 +44,10 @@ def side_rule(side) -> str | None:
 
 def count_rule(name: str, value, lo: int = 1) -> str | None:
     """A static count (elements, nodes) must be an integer >= lo."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
-        return f"{name} must be an integer >= {lo}, got {value!r}"
+    try:
+        integer(name, value, lo)
+    except ConfigError as error:
+        return str(error)
     return None
 
 
