@@ -2,6 +2,7 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from nsga_jax.models import ElasticBar, Model
 
@@ -42,3 +43,11 @@ class GenericBar(ElasticBar):
     @property
     def linear_constraints(self):
         return False
+
+
+def spd_system(n: int, seed: int):
+    """A random symmetric positive definite matrix A = B Bᵀ + n I (n, n) and
+    a right-hand side (n,), reproducible from ``seed``."""
+    rng = np.random.default_rng(seed)
+    b = rng.normal(size=(n, n))
+    return jnp.asarray(b @ b.T + n * np.eye(n)), jnp.asarray(rng.normal(size=n))

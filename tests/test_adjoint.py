@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import spd_system
 from jax.extend import core as jcore
 
 import nsga_jax as nj
@@ -13,10 +14,7 @@ from nsga_jax.integrators.linalg import Factorisation
 from nsga_jax.integrators.newton import Problem, Residual, newton, solve
 
 N = 5
-RNG = np.random.default_rng(7)
-B = RNG.normal(size=(N, N))
-A = jnp.asarray(B @ B.T + N * np.eye(N))
-RHS = jnp.asarray(RNG.normal(size=N))
+A, RHS = spd_system(N, seed=7)
 TOL = 1e-13
 WRAPPERS = {"custom_jvp_call", "pjit", "jit", "closed_call"}
 

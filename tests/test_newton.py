@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import spd_system
 
 import nsga_jax
 from nsga_jax import simulate
@@ -15,10 +16,7 @@ from nsga_jax.integrators.newton import Problem, Residual, newton, where_needed
 from nsga_jax.scenes.base import REGISTRY, load_scene, make_scheme, parametrize
 
 N = 6
-RNG = np.random.default_rng(3)
-B = RNG.normal(size=(N, N))
-A = jnp.asarray(B @ B.T + N * np.eye(N))
-RHS = jnp.asarray(RNG.normal(size=N))
+A, RHS = spd_system(N, seed=3)
 TOL = 1e-12
 
 
