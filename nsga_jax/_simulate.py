@@ -38,7 +38,7 @@ from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
-from .precision import DTYPES, cast_floats, precision
+from .precision import DTYPES, cast_floats
 from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .saveat import DEVICE_ONLY, SaveAt, refuse
@@ -199,10 +199,9 @@ def simulate(
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     if saveat.chunks is not None:
         on_chunk = chunk_files(saveat.chunks, then=on_chunk)
-    with precision(dtype):
-        run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
-                                        v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
-                                        on_chunk=on_chunk, record_every=record_every, dtype=dtype)
+    run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
+                                    v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
+                                    on_chunk=on_chunk, record_every=record_every, dtype=dtype)
     warnings += invariant_warnings(totals, tolerances, h, t0)
     for message in warnings:
         _warnings.warn(message, InvariantWarning, stacklevel=2)
@@ -241,7 +240,7 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
     length = chunk_size or chunk_length(model)
     real = np.dtype(dtype).type
 
-    args0 = (model, scheme, jnp.asarray(t0), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h))
+    args0 = (model, scheme, jnp.asarray(t0, dtype), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h, dtype))
     tc = time.perf_counter()
     with cache_events() as cached_prep:
         prep = _prepare_and_init.lower(*args0).compile()
