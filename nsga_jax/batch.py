@@ -35,7 +35,7 @@ from .integrators.linalg import bounded_lapack_batches
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import RunTotals
-from .precision import DTYPES, cast_floats
+from .precision import DTYPES, cast_floats, require_x64_for
 from .results import ConfigError, Result
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .solution import Observables, Solution, host_solution, with_observables
@@ -307,6 +307,7 @@ def simulate_batch(
     check_scheme(scheme)
     check_model_instance(model)
     dtype = choice("dtype", dtype, DTYPES)
+    require_x64_for(dtype)
     hs = np.atleast_1d(np.asarray(hs, dtype=float)) if not isinstance(hs, (str, bytes)) else hs
     if isinstance(hs, (str, bytes)) or hs.ndim != 1 or hs.size == 0:
         raise TypeError(f"hs must be a non-empty sequence of step sizes, got {describe(hs)}")
