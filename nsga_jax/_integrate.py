@@ -155,7 +155,7 @@ def integrate(
         if np.shape(x) != (model.n_dof,):  # numpy's shape: lists too, and tracers by their .shape
             raise ConfigError(f"{name} must have shape ({model.n_dof},), got {np.shape(x)}")
     refuse_without_implicit_adjoint(scheme)
-    dtype = jnp.result_type(float)
+    dtype = jnp.result_type(*(jnp.asarray(x) for x in (q0, v0)), float)  # the precision of q0 and v0
     t0 = jnp.asarray(t0, dtype)
     h = jnp.asarray(h, dtype)
     q0 = jnp.asarray(q0, dtype)

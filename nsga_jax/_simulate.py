@@ -38,7 +38,7 @@ from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
-from .precision import DTYPES, cast_floats, precision
+from .precision import DTYPES, cast_floats, require_x64_for
 from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .saveat import DEVICE_ONLY, SaveAt, refuse
@@ -164,7 +164,10 @@ def simulate(
             from the finished solution (a scene's observables), stored in
             ``Solution.observables``.
         dtype: ``"float64"`` (default) or ``"float32"``: the precision of the
-            whole run (model, state, operators, records). In float32 the
+            whole run (model, state, operators, records): the model's and
+            scheme's leaves, q0, v0, h and t0 are cast to it and every array
+            the step creates follows them (``jax_enable_x64`` is left as it
+            is; float64 needs it on). In float32 the
             round-off of an assembled stiff force can exceed eq. 51's bound at
             the default ``tol_r = 1e-5``.
         strict: raise :class:`InvariantError` when the energy rises at an
@@ -178,6 +181,7 @@ def simulate(
     check_scheme(scheme)
     check_model_instance(model)
     dtype = choice("dtype", dtype, DTYPES)
+    require_x64_for(dtype)
     t0, t1, h, n_steps = time_grid(t0, t1, h, dtype)
     q0 = state_vector("q0", q0, model.n_dof)
     v0 = state_vector("v0", v0, model.n_dof)
@@ -199,10 +203,9 @@ def simulate(
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     if saveat.chunks is not None:
         on_chunk = chunk_files(saveat.chunks, then=on_chunk)
-    with precision(dtype):
-        run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
-                                        v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
-                                        on_chunk=on_chunk, record_every=record_every, dtype=dtype)
+    run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
+                                    v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
+                                    on_chunk=on_chunk, record_every=record_every, dtype=dtype)
     warnings += invariant_warnings(totals, tolerances, h, t0)
     for message in warnings:
         _warnings.warn(message, InvariantWarning, stacklevel=2)
@@ -237,14 +240,14 @@ def _energy_of(model: Model):
 
 def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
                record_every, dtype) -> tuple[dict[str, Any], RunTotals, ConvergenceError | None]:
-    """The time loop of :func:`simulate` on validated arguments, in the precision
-    already set by the caller; returns the solution's pieces (the arguments of
+    """The time loop of :func:`simulate` on validated arguments, in ``dtype``
+    (that of the model, scheme, q0 and v0 it is given); returns the solution's pieces (the arguments of
     :func:`~nsga_jax.solution.host_solution`), the running totals and, when
     ``throw`` and a step failed, the error to raise."""
     length = chunk_size or chunk_length(model)
     real = np.dtype(dtype).type
 
-    args0 = (model, scheme, jnp.asarray(t0), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h))
+    args0 = (model, scheme, jnp.asarray(t0, dtype), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h, dtype))
     tc = time.perf_counter()
     with cache_events() as cached_prep:
         prep = _prepare_and_init.lower(*args0).compile()

@@ -35,7 +35,7 @@ from .integrators.linalg import bounded_lapack_batches
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .models.base import Model
 from .monitors import RunTotals
-from .precision import DTYPES, cast_floats, precision
+from .precision import DTYPES, cast_floats, require_x64_for
 from .results import ConfigError, Result
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .solution import Observables, Solution, host_solution, with_observables
@@ -212,7 +212,8 @@ class BatchRun:
         self.length = length or batch_chunk_length(model, B)
         prepare, self._run = _compiled_steps(self.length, mesh)
         schemes = broadcast_members(scheme, B)
-        args = _place((model, schemes, np.full(B, t0), np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
+        t0s = np.full(B, t0, np.asarray(hs).dtype)  # in the precision of the step sizes
+        args = _place((model, schemes, t0s, np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
         bounded = needs_bounded_lapack_batches(mesh)
         tc = time.perf_counter()
         with bounded_lapack_batches(bounded):
@@ -306,6 +307,7 @@ def simulate_batch(
     check_scheme(scheme)
     check_model_instance(model)
     dtype = choice("dtype", dtype, DTYPES)
+    require_x64_for(dtype)
     hs = np.atleast_1d(np.asarray(hs, dtype=float)) if not isinstance(hs, (str, bytes)) else hs
     if isinstance(hs, (str, bytes)) or hs.ndim != 1 or hs.size == 0:
         raise TypeError(f"hs must be a non-empty sequence of step sizes, got {describe(hs)}")
@@ -321,15 +323,14 @@ def simulate_batch(
     check_memory(model.n_dof, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
                  record_numbers=sum(packed_sizes(template)), what="each run's model")
     B = len(hs)
-    with precision(dtype):
-        model_c, scheme_c = cast_floats((model, scheme), dtype)
-        run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),
-                       np.tile(v0.astype(dtype), (B, 1)), hs.astype(dtype), n_steps, mesh=mesh)
-        chunks: list[list[StepOutput]] = [[] for _ in range(B)]
-        for out, done in run.chunks():
-            for b in range(B):
-                if done[b].any():
-                    chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
+    model_c, scheme_c = cast_floats((model, scheme), dtype)
+    run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),
+                   np.tile(v0.astype(dtype), (B, 1)), hs.astype(dtype), n_steps, mesh=mesh)
+    chunks: list[list[StepOutput]] = [[] for _ in range(B)]
+    for out, done in run.chunks():
+        for b in range(B):
+            if done[b].any():
+                chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
     return [with_observables(member_solution(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype),
                                              float(hs[b]), int(n_steps[b]), run), observables) for b in range(B)]
 

@@ -29,7 +29,7 @@ import numpy as np
 from .batch import BatchRun, broadcast_members
 from .compilation_cache import compilation_cache
 from .metrics import relative_l1_error
-from .precision import DTYPES, cast_floats, precision
+from .precision import DTYPES, cast_floats
 from .results import ConfigError
 from .scenes.base import REGISTRY, Scene, load_scene
 from .validation import choice, integer, real, step_count
@@ -73,12 +73,11 @@ def per_call(step: Callable, x0, repeats: int, inner: int) -> float:
 
 def factor_solve_seconds(n: int, dtype: str, repeats: int = 3) -> float:
     """One dense LU factorisation and solve of an n × n system."""
-    with precision(dtype):
-        rng = np.random.default_rng(0)
-        A = jnp.asarray(rng.normal(size=(n, n)) + n * np.eye(n), dtype)
-        tiny = 1e-30
-        inner = max(3, min(2000, int(2e6 / n**2)))
-        return per_call(lambda x: jnp.linalg.solve(A + tiny * x[0], x), jnp.ones(n, dtype), repeats, inner)
+    rng = np.random.default_rng(0)
+    A = jnp.asarray(rng.normal(size=(n, n)) + n * np.eye(n), dtype)
+    tiny = 1e-30
+    inner = max(3, min(2000, int(2e6 / n**2)))
+    return per_call(lambda x: jnp.linalg.solve(A + tiny * x[0], x), jnp.ones(n, dtype), repeats, inner)
 
 
 def _bench_scene(name: str, overrides: dict, max_steps: int) -> Scene:
@@ -112,29 +111,28 @@ def _batched(scene: Scene, dtype: str, batch: int, repeats: int,
     wall time, compile time from the persistent cache), or ``None`` when the
     estimate exceeds ``max_seconds`` (the batch is then not run in full)."""
     n = step_count(0.0, scene.solver["t_end"], scene.solver["h"])
-    with precision(dtype):
-        model, scheme = cast_floats((scene.model, scene.scheme()), dtype)
-        members = broadcast_members(model, batch)
-        q0 = np.tile(scene.q0.astype(dtype), (batch, 1))
-        v0 = np.tile(scene.v0.astype(dtype), (batch, 1))
-        hs = np.full(batch, scene.solver["h"], dtype)
+    model, scheme = cast_floats((scene.model, scene.scheme()), dtype)
+    members = broadcast_members(model, batch)
+    q0 = np.tile(scene.q0.astype(dtype), (batch, 1))
+    v0 = np.tile(scene.v0.astype(dtype), (batch, 1))
+    hs = np.full(batch, scene.solver["h"], dtype)
 
-        def run(steps: int) -> tuple[BatchRun, float]:
-            """The batch run for ``steps`` steps, and its preparation's wall time [s]."""
-            out = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, steps))
-            prepared = out.wall_time
-            for _ in out.chunks():
-                pass
-            return out, prepared
+    def run(steps: int) -> tuple[BatchRun, float]:
+        """The batch run for ``steps`` steps, and its preparation's wall time [s]."""
+        out = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, steps))
+        prepared = out.wall_time
+        for _ in out.chunks():
+            pass
+        return out, prepared
 
-        probe_steps = min(n, max(PROBE_MIN_STEPS, n // PROBE_FRACTION))
-        probe, prepared = run(probe_steps)  # the first, cold compilation: the same programs whatever the steps
-        estimate = prepared + (probe.wall_time - prepared) * n / probe_steps
-        if estimate > max_seconds:
-            return estimate, None
-        best = min(run(n)[0].wall_time for _ in range(repeats))
-        jax.clear_caches()
-        cached = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, n)).compile_time
+    probe_steps = min(n, max(PROBE_MIN_STEPS, n // PROBE_FRACTION))
+    probe, prepared = run(probe_steps)  # the first, cold compilation: the same programs whatever the steps
+    estimate = prepared + (probe.wall_time - prepared) * n / probe_steps
+    if estimate > max_seconds:
+        return estimate, None
+    best = min(run(n)[0].wall_time for _ in range(repeats))
+    jax.clear_caches()
+    cached = BatchRun(members, scheme, 0.0, q0, v0, hs, np.full(batch, n)).compile_time
     return estimate, (probe.compile_time, best, cached)
 
 

@@ -1,8 +1,16 @@
-"""The precision of a run: float64 (the default) or float32, set for the enclosed code."""
+"""The precision of a run: float64 (the default) or float32, taken from its inputs.
+
+A run computes in the precision of what it is given: :func:`cast_floats` casts
+the model's and the scheme's floating-point leaves, and the callers cast q0, v0,
+h and t0, to the run's dtype; every array the schemes and models create takes
+its dtype from these (``q.dtype``, ``h.dtype``, a leaf's dtype) or is a Python
+number (weakly typed). ``jax_enable_x64`` stays on throughout, so a float32 run
+neither changes JAX's configuration nor clears its caches: its programs are
+cached like any other, keyed on the float32 shapes of their arguments.
+"""
 
 from __future__ import annotations
 
-import contextlib
 from typing import TypeVar
 
 import equinox as eqx
@@ -10,29 +18,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .results import ConfigError
+
 DTYPES = ("float64", "float32")
 
 
-@contextlib.contextmanager
-def precision(dtype: str):
-    """Run the enclosed JAX code in ``dtype`` ("float64" or "float32").
-
-    float32 turns ``jax_enable_x64`` off for the enclosed code and clears JAX's
-    caches on entry and on exit: JAX caches the constants a traced function
-    closes over (NumPy arrays) without their precision, so a function traced in
-    one precision would otherwise be lowered with the other's constants. A
-    float32 run therefore compiles afresh each time.
-    """
+def require_x64_for(dtype: str) -> None:
+    """Refuse a float64 run while ``jax_enable_x64`` is off (set so by the
+    caller or ``NSGA_JAX_X64=0``): JAX would then make its arrays float32."""
     # JAX's Config defines its options as attributes at run time: none is declared to mypy
-    if dtype == "float64" and jax.config.jax_enable_x64:  # type: ignore[attr-defined]
-        yield
-        return
-    jax.clear_caches()
-    try:
-        with jax.enable_x64(dtype == "float64"):
-            yield
-    finally:
-        jax.clear_caches()
+    if dtype == "float64" and not jax.config.jax_enable_x64:  # type: ignore[attr-defined]
+        raise ConfigError('dtype="float64" needs jax_enable_x64 on (jax.config.update("jax_enable_x64", True)); '
+                          'or run with dtype="float32"')
 
 
 _Tree = TypeVar("_Tree")
@@ -45,5 +42,3 @@ def cast_floats(tree: _Tree, dtype: str) -> _Tree:
         return jnp.asarray(x, dtype) if eqx.is_inexact_array(x) or isinstance(x, np.floating) else x
 
     return jax.tree_util.tree_map(cast, tree)
-
-

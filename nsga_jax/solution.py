@@ -144,7 +144,7 @@ def traced_stats(subproblems: tuple[str, ...], iterations: jax.Array, result: ja
     keys of :func:`host_stats` that need no host (no timings, energies or
     warnings)."""
     solves = jnp.sum(iterations, axis=1)
-    real = jnp.result_type(float)
+    real = jnp.result_type(gap, float)  # the run's precision
     stats: dict[str, Any] = {
         "iterations": {
             name: {"mean": jnp.mean(iterations[:, i], dtype=real), "max": jnp.max(iterations[:, i])}

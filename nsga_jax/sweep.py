@@ -38,7 +38,7 @@ from .distributed import agree
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
 from .metrics import relative_l1_error
 from .monitors import RunTotals
-from .precision import cast_floats, precision
+from .precision import cast_floats
 from .results import ConfigError
 from .scenes.base import configure
 from .solution import Solution, float64_view
@@ -101,25 +101,24 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
     hs = np.asarray([s.solver["h"] for s in scenes])
     n_steps = np.asarray([step_count(0.0, t_end, h) for h in hs])
     every = np.maximum(1, -(-n_steps // max_records))  # per member: at most max_records kept
-    with precision(first.solver["dtype"]):
-        dtype = first.solver["dtype"]
-        model = stack_models([s.model for s in scenes])
-        model, scheme = cast_floats((model, first.scheme()), dtype)
-        q0 = np.stack([s.q0 for s in scenes]).astype(dtype)
-        v0 = np.stack([s.v0 for s in scenes]).astype(dtype)
-        run = BatchRun(model, scheme, 0.0, q0, v0, hs.astype(dtype), n_steps, mesh=mesh)
-        totals = [RunTotals() for _ in batch]  # every step's statistics, whatever the records keep
-        kept, masks = [], []
-        start = 0
-        for out, done in run.chunks():
-            step = start + 1 + np.arange(done.shape[1])
-            keep = done & ((step[None, :] % every[:, None] == 0) | (step[None, :] == n_steps[:, None]))
-            cols = keep.any(axis=0)
-            kept.append(jax.tree_util.tree_map(lambda x: x[:, cols], out))
-            masks.append(keep[:, cols])
-            for b, member_totals in enumerate(totals):  # a member's steps are a prefix of the chunk
-                member_totals.add(jax.tree_util.tree_map(lambda x: x[b][done[b]], out), first_step=start + 1)
-            start += done.shape[1]
+    dtype = first.solver["dtype"]
+    model = stack_models([s.model for s in scenes])
+    model, scheme = cast_floats((model, first.scheme()), dtype)
+    q0 = np.stack([s.q0 for s in scenes]).astype(dtype)
+    v0 = np.stack([s.v0 for s in scenes]).astype(dtype)
+    run = BatchRun(model, scheme, 0.0, q0, v0, hs.astype(dtype), n_steps, mesh=mesh)
+    totals = [RunTotals() for _ in batch]  # every step's statistics, whatever the records keep
+    kept, masks = [], []
+    start = 0
+    for out, done in run.chunks():
+        step = start + 1 + np.arange(done.shape[1])
+        keep = done & ((step[None, :] % every[:, None] == 0) | (step[None, :] == n_steps[:, None]))
+        cols = keep.any(axis=0)
+        kept.append(jax.tree_util.tree_map(lambda x: x[:, cols], out))
+        masks.append(keep[:, cols])
+        for b, member_totals in enumerate(totals):  # a member's steps are a prefix of the chunk
+            member_totals.add(jax.tree_util.tree_map(lambda x: x[b][done[b]], out), first_step=start + 1)
+        start += done.shape[1]
     records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept)
     mask = np.concatenate(masks, axis=1)
     rows = []

@@ -69,24 +69,71 @@ def test_float32_run_converges_and_follows_float64(name, overrides, tol=1e-4):
     assert sol.observables["energy"].dtype == np.float64  # observables are evaluated in float64
 
 
-def test_precision_switch_does_not_leak_constants():
-    # JAX caches the NumPy constants a traced function closes over without their precision;
-    # precision() clears the caches around float32 code, so each precision sees its own.
+def _float64_values(jaxpr) -> list[str]:
+    """The equations of ``jaxpr`` (and of the jaxprs nested in it) that make a
+    float64 value, and its float64 constants; weakly typed values (Python
+    numbers) take the precision of what they meet and are not counted."""
+    import jax.extend as jex
+
+    found = [f"constant {v.aval}" for v in jaxpr.constvars if v.aval.dtype == np.float64]
+    for eqn in jaxpr.eqns:
+        if any(getattr(v.aval, "dtype", None) == np.float64 and not v.aval.weak_type for v in eqn.outvars):
+            found.append(f"{eqn.primitive.name} at {eqn.source_info.traceback}")
+        for param in eqn.params.values():
+            for sub in param if isinstance(param, (list, tuple)) else (param,):
+                if isinstance(sub, jex.core.ClosedJaxpr):
+                    found += _float64_values(sub.jaxpr)
+                elif isinstance(sub, jex.core.Jaxpr):
+                    found += _float64_values(sub)
+    return found
+
+
+@pytest.mark.parametrize("name", ["impacting_bar", "rigid_box", "flexible_pendulum", "flexible_cube"])
+def test_float32_run_computes_in_float32_with_x64_on(name):
+    # the precision comes from the inputs: with x64 on, the float32 programs of
+    # simulate (preparation and initial state, and the chunk of steps) hold no float64 value
+    import equinox as eqx
     import jax
     import jax.numpy as jnp
 
-    from nsga_jax._simulate import precision
+    from nsga_jax._simulate import _run_chunk, prepare_and_init
+    from nsga_jax.precision import cast_floats
 
-    C = np.linspace(0.0, 1.0, 24).reshape(8, 3)
+    assert jax.config.jax_enable_x64
+    scene = load_scene(name)
+    model, scheme = cast_floats((scene.model, scene.scheme()), "float32")
+    t0, h = jnp.float32(0.0), jnp.float32(scene.solver["h"])
+    q0, v0 = jnp.asarray(scene.q0, jnp.float32), jnp.asarray(scene.v0, jnp.float32)
+    prepare = eqx.filter_make_jaxpr(prepare_and_init)(model, scheme, t0, q0, v0, h)[0]
+    assert _float64_values(prepare.jaxpr) == []
+    ops, state = prepare_and_init(model, scheme, t0, q0, v0, h)
+    assert state.q.dtype == state.t.dtype == state.a.dtype == jnp.float32
+    chunk = eqx.filter_make_jaxpr(lambda *args: _run_chunk(*args, 2))(
+        model, scheme, ops, state, h, t0, jnp.asarray(2, jnp.int32), jnp.asarray(False))[0]
+    assert _float64_values(chunk.jaxpr) == []
 
-    def f(x):
-        return jnp.sum(C * x)
 
-    with precision("float32"):
-        assert jax.jit(f)(np.ones(3)).dtype == np.float32
-    assert jax.jit(f)(np.ones(3)).dtype == np.float64
-    with precision("float32"):
-        assert jax.jit(f)(np.ones(3)).dtype == np.float32
+def test_float64_run_refused_with_x64_off():
+    import jax
+
+    scene = load_scene("bouncing_ball", {"t_end": 0.01})
+    with jax.enable_x64(False), pytest.raises(nj.ConfigError, match="jax_enable_x64"):
+        scene.run(dtype="float64")
+
+
+def test_runs_of_either_precision_do_not_leak_into_each_other():
+    """float64, float32, float64 in one process: each run computes in its own
+    precision (JAX caches the constants a traced function closes over, so a
+    program traced for one precision must never serve the other), and the
+    second float64 run equals the first exactly."""
+    scene = load_scene("bouncing_ball", {"t_end": 0.4})
+    first = scene.run(dtype="float64")
+    single = scene.run(dtype="float32")
+    again = scene.run(dtype="float64")
+    assert first.q.dtype == again.q.dtype == np.float64 and single.q.dtype == np.float32
+    np.testing.assert_array_equal(first.q, again.q)
+    np.testing.assert_array_equal(first.v, again.v)
+    np.testing.assert_allclose(single.q, first.q, rtol=0, atol=1e-4)
 
 
 def test_float32_failure_message_names_the_precision():

@@ -22,10 +22,10 @@ def bar_internal_force(u_e: jax.Array, v_e: jax.Array, p) -> jax.Array:
 def bar_consistent_mass(p) -> jax.Array:
     """Consistent mass matrix rhoA le / 6 [[2, 1], [1, 2]], shape (2, 2) [kg]."""
     _, le, rhoA = p
-    return rhoA * le / 6.0 * jnp.array([[2.0, 1.0], [1.0, 2.0]])
+    return rhoA * le / 6.0 * jnp.array([[2.0, 1.0], [1.0, 2.0]], jnp.result_type(rhoA, le))
 
 
 def bar_lumped_mass(p) -> jax.Array:
     """Lumped (row-sum) mass matrix rhoA le / 2 I, shape (2, 2) [kg]."""
     _, le, rhoA = p
-    return rhoA * le / 2.0 * jnp.eye(2)
+    return rhoA * le / 2.0 * jnp.eye(2, dtype=jnp.result_type(rhoA, le))

@@ -46,7 +46,9 @@ def beam_mass(p, lumped: bool = False) -> jax.Array:
     """Mass matrix (6, 6): translational ρA and rotary ρI inertia, consistent
     (L0/6 [[2, 1], [1, 2]]) or lumped (L0/2 I) for each of x, y, θ."""
     _, _, _, L0, rhoA, rhoI, _ = p
-    base = L0 / 2.0 * jnp.eye(2) if lumped else L0 / 6.0 * jnp.array([[2.0, 1.0], [1.0, 2.0]])
+    real = jnp.result_type(L0, rhoA, rhoI)  # the element's precision
+    base = (L0 / 2.0 * jnp.eye(2, dtype=real) if lumped
+            else L0 / 6.0 * jnp.array([[2.0, 1.0], [1.0, 2.0]], real))
     per_dof = jnp.stack([rhoA, rhoA, rhoI])
     # dof order: node a, component i -> 3 a + i
-    return jnp.einsum("ab,i,ij->aibj", base, per_dof, jnp.eye(3)).reshape(6, 6)
+    return jnp.einsum("ab,i,ij->aibj", base, per_dof, jnp.eye(3, dtype=real)).reshape(6, 6)

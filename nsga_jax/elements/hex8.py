@@ -25,7 +25,7 @@ GAUSS_POINTS = _CORNERS * _G  # (8, 3); all weights are 1
 
 def shape_functions(xi: jax.Array) -> jax.Array:
     """N_a(ξ), shape (8,)."""
-    return jnp.prod(1.0 + _CORNERS * xi, axis=1) / 8.0
+    return jnp.prod(1.0 + jnp.asarray(_CORNERS, xi.dtype) * xi, axis=1) / 8.0
 
 
 def shape_gradients(xi: jax.Array) -> jax.Array:
@@ -36,7 +36,7 @@ def shape_gradients(xi: jax.Array) -> jax.Array:
 def hex8_geometry(X_e: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Reference geometry of an element with nodes X_e (8, 3): dN/dX at each Gauss
     point (8, 8, 3) and the integration weights det(dX/dξ) (8,) [m³]."""
-    dN = jax.vmap(shape_gradients)(jnp.asarray(GAUSS_POINTS))  # (gp, a, j)
+    dN = jax.vmap(shape_gradients)(jnp.asarray(GAUSS_POINTS, jnp.result_type(X_e, float)))  # (gp, a, j)
     J = jnp.einsum("ai,gaj->gij", X_e, dN)  # dX_i/dξ_j
     dNdX = jnp.einsum("gaj,gji->gai", dN, jnp.linalg.inv(J))
     return dNdX, jnp.linalg.det(J)
@@ -51,7 +51,7 @@ def svk_energy(x_e: jax.Array, p) -> jax.Array:
     """Strain energy [J]: Σ_gp (λ/2 (tr E)² + μ E:E) dV, E = (FᵀF - I)/2."""
     dNdX, dV, lam, mu, _ = p
     F = jnp.einsum("ai,gaj->gij", x_e.reshape(8, 3), dNdX)
-    E = 0.5 * (jnp.einsum("gki,gkj->gij", F, F) - jnp.eye(3))
+    E = 0.5 * (jnp.einsum("gki,gkj->gij", F, F) - jnp.eye(3, dtype=F.dtype))
     trE = jnp.trace(E, axis1=1, axis2=2)
     W = 0.5 * lam * trE**2 + mu * jnp.sum(E * E, axis=(1, 2))
     return jnp.sum(W * dV)
@@ -62,21 +62,23 @@ def hex8_internal_force(x_e: jax.Array, v_e: jax.Array, p) -> jax.Array:
     return -jax.grad(svk_energy)(x_e, p)
 
 
-def _gauss_shape_functions() -> jax.Array:
-    return jax.vmap(shape_functions)(jnp.asarray(GAUSS_POINTS))  # (gp, a)
+def _gauss_shape_functions(dtype) -> jax.Array:
+    return jax.vmap(shape_functions)(jnp.asarray(GAUSS_POINTS, dtype))  # (gp, a)
 
 
 def hex8_mass(p) -> jax.Array:
     """Consistent mass matrix (24, 24) [kg]."""
     _, dV, _, _, rho = p
-    N = _gauss_shape_functions()
-    return jnp.kron(rho * jnp.einsum("g,ga,gb->ab", dV, N, N), jnp.eye(3))
+    real = jnp.result_type(dV, rho)  # the element's precision
+    N = _gauss_shape_functions(real)
+    return jnp.kron(rho * jnp.einsum("g,ga,gb->ab", dV, N, N), jnp.eye(3, dtype=real))
 
 
 def hex8_body_force(p, acceleration: jax.Array) -> jax.Array:
     """Consistent nodal load (24,) of a uniform body acceleration (3,) [m/s²] (gravity)."""
     _, dV, _, _, rho = p
-    return jnp.kron(rho * jnp.einsum("g,ga->a", dV, _gauss_shape_functions()), acceleration)
+    N = _gauss_shape_functions(jnp.result_type(dV, rho))
+    return jnp.kron(rho * jnp.einsum("g,ga->a", dV, N), acceleration)
 
 
 def lame(E: jax.Array, nu: jax.Array) -> tuple[jax.Array, jax.Array]:

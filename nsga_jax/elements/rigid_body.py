@@ -22,15 +22,16 @@ import numpy as np
 
 def second_moments(inertia: jax.Array) -> jax.Array:
     """S = tr(J)/2 I - J, shape (3, 3) [kg m²], from the inertia tensor J (3, 3)."""
-    return 0.5 * jnp.trace(inertia) * jnp.eye(3) - inertia
+    return 0.5 * jnp.trace(inertia) * jnp.eye(3, dtype=inertia.dtype) - inertia
 
 
 def natural_mass_matrix(mass: jax.Array, inertia: jax.Array) -> jax.Array:
     """Constant mass matrix (12, 12) of a rigid body in natural coordinates."""
     S = second_moments(inertia)
-    M = jnp.zeros((12, 12))
-    M = M.at[:3, :3].set(mass * jnp.eye(3))
-    return M.at[3:, 3:].set(jnp.kron(S, jnp.eye(3)))
+    real = jnp.result_type(mass, inertia)  # the body's precision
+    M = jnp.zeros((12, 12), real)
+    M = M.at[:3, :3].set(mass * jnp.eye(3, dtype=real))
+    return M.at[3:, 3:].set(jnp.kron(S, jnp.eye(3, dtype=real)))
 
 
 def frame(q: jax.Array) -> jax.Array:
@@ -59,7 +60,8 @@ def rigidity_constraints(q: jax.Array, length: jax.Array) -> jax.Array:
     of its own, which doubled the rigid box's step time and compile time."""
     frame_rows = q[3:12].reshape(3, 3)  # u, v, w
     products = jnp.sum(frame_rows[_FIRST] * frame_rows[_SECOND], axis=1)
-    return length * _HALF * (products - _NORMS)
+    half, norms = (jnp.asarray(c, products.dtype) for c in (_HALF, _NORMS))  # in q's precision
+    return length * half * (products - norms)
 
 
 def point_heights(q: jax.Array, X: jax.Array) -> jax.Array:

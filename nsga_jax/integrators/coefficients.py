@@ -23,7 +23,7 @@ class GenAlphaCoefficients(eqx.Module):
 
     @classmethod
     def from_rho_inf(cls, rho_inf: ScalarLike) -> "GenAlphaCoefficients":
-        rho = jnp.asarray(rho_inf, dtype=float)
+        rho = jnp.asarray(rho_inf)  # its own precision: a float32 scheme gives float32 coefficients
         alpha_m = (2.0 * rho - 1.0) / (rho + 1.0)
         alpha_f = rho / (rho + 1.0)
         gamma = 0.5 + alpha_f - alpha_m

@@ -73,10 +73,11 @@ class AbstractGenAlpha(AbstractScheme):
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
         """Initial state with a consistent smooth acceleration (Algorithm 1, lines 2-3)."""
-        q0 = jnp.asarray(q0, dtype=float)
-        v0 = jnp.asarray(v0, dtype=float)
+        real = jnp.result_type(q0, float)  # the state's precision: q0's (float32 or float64)
+        q0 = jnp.asarray(q0, real)
+        v0 = jnp.asarray(v0, real)
         vd0 = consistent_acceleration(model, t0, q0, v0)
-        return StepState(t=jnp.asarray(t0, dtype=float), q=q0, v=v0, vd=vd0, a=vd0)
+        return StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
 
     def predict(self, state: StepState, h: Scalar) -> tuple[Vector, Vector, Vector]:
         """Algorithm 1, lines 5-9: the pseudo-acceleration a⁺ (v̇̃ = 0), ṽ and q̃."""

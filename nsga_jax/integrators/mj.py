@@ -63,10 +63,11 @@ class MJ(AbstractScheme):
                             enabled=self.fast_paths)
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
-        q0 = jnp.asarray(q0, dtype=float)
-        v0 = jnp.asarray(v0, dtype=float)
+        real = jnp.result_type(q0, float)  # the state's precision: q0's (float32 or float64)
+        q0 = jnp.asarray(q0, real)
+        v0 = jnp.asarray(v0, real)
         zero = jnp.zeros_like(q0)
-        return StepState(t=jnp.asarray(t0, dtype=float), q=q0, v=v0, vd=zero, a=zero)
+        return StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=zero, a=zero)
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
         tol = self.tolerances

@@ -316,5 +316,5 @@ def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector) ->
         return jnp.linalg.solve(M, f)
     GB = jax.jacfwd(model.bilateral)(q0)
     conv = jax.jvp(lambda x: jax.jacfwd(model.bilateral)(x) @ v0, (q0,), (v0,))[1]
-    S = jnp.block([[M, -GB.T], [GB, jnp.zeros((nb, nb))]])
+    S = jnp.block([[M, -GB.T], [GB, jnp.zeros((nb, nb), M.dtype)]])
     return jnp.linalg.solve(S, jnp.concatenate([f, -conv]))[: model.n_dof]

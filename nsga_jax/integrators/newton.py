@@ -124,7 +124,7 @@ def where_needed(pred: jax.Array, fn: Callable[[], Any], otherwise: Any) -> Any:
 
 def convergence_bound(terms: list[jax.Array], tol_r: Scalar, tol_f: Scalar) -> Scalar:
     """Right-hand side of eq. 51: ``tol_r * (sum_k ||r_k|| + tol_f)``."""
-    total = sum((jnp.linalg.norm(t) for t in terms), jnp.zeros(()))
+    total = sum((jnp.linalg.norm(t) for t in terms), jnp.zeros((), jnp.result_type(*terms, float)))
     return tol_r * (total + tol_f)
 
 

@@ -129,7 +129,8 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
     if not enabled:
         return generic_operators()
     n, nb, nc = model.n_dof, model.n_bilateral, model.n_constraints
-    zeros = jnp.zeros((n,))
+    real = jnp.result_type(t0, float)  # the run's precision, that of t0 (float32 or float64)
+    zeros = jnp.zeros((n,), real)
     b = model.bandwidth if banded(model) else None
     mass: AbstractMass = VaryingMass()
     M = K = C = None
@@ -138,7 +139,7 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
         M_norm = jnp.linalg.norm(M)
         mass = ConstantMass(M, M_norm) if b is None else BandedMass(M, M_norm, band_matrix(M, b))
     force: AbstractForce = NonlinearForce()
-    K_norm = C_norm = jnp.zeros(())
+    K_norm = C_norm = jnp.zeros((), real)
     if model.linear_force:
         K, C = model.tangents(zeros, zeros, t0)
         if not model.velocity_dependent_force:

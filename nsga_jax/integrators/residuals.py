@@ -34,7 +34,7 @@ class Scaling(eqx.Module):
 
     @classmethod
     def of(cls, model: Model, h: Scalar) -> "Scaling":
-        mbar = jnp.asarray(model.mbar, dtype=float)
+        mbar = jnp.asarray(model.mbar)  # in the model's precision (a Python number: weakly typed)
         return cls(ks=mbar / h, kp=mbar, kv=mbar)
 
 

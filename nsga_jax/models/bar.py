@@ -61,8 +61,7 @@ class ElasticBar(Model):
     def elements(self) -> ElementGroup:
         ne = self.n_elements
         dofs = StaticIndex(np.stack([np.arange(ne), np.arange(1, ne + 1)], axis=1))
-        ones = jnp.ones((ne,))
-        params = (self.E * self.area * ones, self.length / ne * ones, self.rho * self.area * ones)
+        params = tuple(jnp.broadcast_to(p, (ne,)) for p in (self.E * self.area, self.length / ne, self.rho * self.area))
         return ElementGroup(dofs=dofs, params=params)
 
     @property

@@ -27,6 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
 from ..results import ConfigError
@@ -170,7 +171,7 @@ class Model(eqx.Module):
     @property
     def restitution(self) -> ConstraintVector:
         """Newton restitution coefficients e, shape (nu,), each in [0, 1]."""
-        return jnp.zeros((self.n_unilateral,))
+        return lax.full((self.n_unilateral,), 0.0)  # weakly typed: takes the run's precision
 
     # ---------------------------------------------------------- monitors
     def energy(self, q: Vector, v: Vector) -> Scalar:

@@ -83,9 +83,8 @@ class PlanarBeam(Model):
     def elements(self) -> ElementGroup:
         ne = self.n_elements
         dofs = StaticIndex(np.arange(3 * ne)[:, None].reshape(ne, 3)[:, :1] + np.arange(6)[None, :])
-        ones = jnp.ones((ne,))
-        params = (self.EA * ones, self.GAs * ones, self.EI * ones, self.length / ne * ones,
-                  self.rhoA * ones, self.rhoI * ones, self.angle * ones)
+        params = tuple(jnp.broadcast_to(p, (ne,)) for p in (self.EA, self.GAs, self.EI, self.length / ne,
+                                                            self.rhoA, self.rhoI, self.angle))
         return ElementGroup(dofs=dofs, params=params)
 
     def reference(self) -> Vector:
@@ -106,7 +105,7 @@ class PlanarBeam(Model):
         ne = self.n_elements
         le = self.length / ne
         weights = jnp.full((ne + 1,), le).at[0].set(le / 2).at[-1].set(le / 2)
-        f = jnp.zeros((ne + 1, 3)).at[:, 1].set(-self.rhoA * self.gravity * weights)
+        f = jnp.zeros((ne + 1, 3), weights.dtype).at[:, 1].set(-self.rhoA * self.gravity * weights)
         return (f.at[-1].add(self.tip_load)).reshape(-1)
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:

@@ -95,7 +95,7 @@ class RigidPendulum(Model):
         return self.m * x
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
-        return jnp.stack([jnp.zeros(()), -self.m * self.gravity]).astype(q.dtype)
+        return jnp.stack([jnp.zeros((), q.dtype), (-self.m * self.gravity).astype(q.dtype)])
 
     def bilateral(self, q: Vector) -> jax.Array:
         return ((q[0] ** 2 + q[1] ** 2 - self.length**2) / (2.0 * self.length))[None]

@@ -15,6 +15,7 @@ from ..elements.rigid_body import (
     natural_mass_matrix,
     point_heights,
     rigidity_constraints,
+    second_moments,
 )
 from ..validation import POSITIVE, UNIT_INTERVAL
 from .base import Model
@@ -84,7 +85,7 @@ class RigidBody(Model):
 
     @property
     def restitution(self) -> jax.Array:
-        return self.e if self.contact else jnp.zeros((0,))
+        return self.e if self.contact else jnp.zeros((0,), self.e.dtype)
 
     # ------------------------------------------------------------ observables
     def rotation(self, q: Vector) -> Matrix:
@@ -109,14 +110,14 @@ class RigidBody(Model):
 
     def angular_momentum(self, q: Vector, v: Vector) -> Vector:
         """Angular momentum about the origin (3,) [kg m²/s]: m r × ṙ + Σ_ij S_ij u_i × u̇_j."""
-        S = 0.5 * jnp.trace(self.inertia) * jnp.eye(3) - self.inertia
+        S = second_moments(self.inertia)
         R, Rdot = frame(q), frame(v)
-        spin = jnp.einsum("ij,ki,lj,mkl->m", S, R, Rdot, _levi_civita())
+        spin = jnp.einsum("ij,ki,lj,mkl->m", S, R, Rdot, _levi_civita(S.dtype))
         return self.mass_ * jnp.cross(q[:3], v[:3]) + spin
 
 
-def _levi_civita() -> jax.Array:
-    eps = jnp.zeros((3, 3, 3))
+def _levi_civita(dtype) -> jax.Array:
+    eps = jnp.zeros((3, 3, 3), dtype)
     for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
         eps = eps.at[i, j, k].set(1.0).at[i, k, j].set(-1.0)
     return eps

@@ -91,7 +91,7 @@ class HexSolid(Model):
         dofs = StaticIndex((3 * conn[:, :, None] + np.arange(3)[None, None, :]).reshape(len(conn), 24))
         lam, mu = lame(self.E, self.nu)
         ne = len(conn)
-        params = (self.shape_gradients, self.volumes, lam * jnp.ones(ne), mu * jnp.ones(ne), self.rho * jnp.ones(ne))
+        params = (self.shape_gradients, self.volumes, *(jnp.broadcast_to(p, (ne,)) for p in (lam, mu, self.rho)))
         return ElementGroup(dofs=dofs, params=params)
 
     @property
@@ -109,10 +109,10 @@ class HexSolid(Model):
         return self.elements.matrix_product(hex8_mass, x)
 
     def external_force(self) -> Vector:
-        g = jnp.array([0.0, 0.0, -1.0]) * self.gravity
+        g = jnp.array([0.0, 0.0, -1.0], self.gravity.dtype) * self.gravity
         group = self.elements
         fe = jax.vmap(lambda p: hex8_body_force(p, g))(group.params)
-        return jnp.zeros((self.n_dof,)).at[group.dofs.array].add(fe)
+        return jnp.zeros((self.n_dof,), fe.dtype).at[group.dofs.array].add(fe)
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
         return self.elements.forces(hex8_internal_force, q, v, self.n_dof) + self.external_force()
