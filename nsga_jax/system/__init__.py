@@ -1,0 +1,21 @@
+"""Systems assembled from parts: bodies, joints, contacts and forces.
+
+See :mod:`nsga_jax.system.base` for the conventions (anchors, dimensions) and
+docs/systems.md for every part, its coordinates, parameters and units.
+"""
+
+from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint, Ground
+from .bodies import PointMass, RigidBody2D
+from .builder import System, check_initial_state
+from .contacts import PlaneContact, SphereContact
+from .flexible import Beam2D
+from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
+from .joints import Distance, Pin, Slider, Weld
+from .model import SystemModel
+
+__all__ = [
+    "GROUND", "AbstractBody", "AbstractContact", "AbstractForce", "AbstractJoint", "Ground",
+    "PointMass", "RigidBody2D", "Beam2D", "System", "check_initial_state", "PlaneContact", "SphereContact",
+    "Gravity", "PrescribedForce", "SpringDamper", "TorsionalSpring", "Distance", "Pin", "Slider", "Weld",
+    "SystemModel",
+]

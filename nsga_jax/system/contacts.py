@@ -1,0 +1,155 @@
+"""Contacts: unilateral constraints g(q) >= 0 with Newton restitution.
+
+Each contact kind gives its gaps [m] (positive apart, zero touching) from
+the anchors it names (see :mod:`nsga_jax.system.base`).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Scalar, Vector
+from .._util import as_float
+from ..validation import UNIT_INTERVAL, Range
+from .base import AbstractContact, point
+
+
+class PlaneContact(AbstractContact):
+    """Material points of one body against a fixed plane (a line in 2D, a
+    point in 1D) through ``origin`` with unit ``normal`` pointing to the
+    admissible side: ``g_i = n · (x_i - origin) - radius >= 0``. With a
+    radius, each point is the centre of a sphere (circle) of that radius.
+
+    The points are ``points`` (body-frame coordinates, (k, dim), on a rigid
+    body; ``None``: its origin) or ``nodes`` (indices, on a flexible body).
+
+    Attributes:
+        normal: (dim,), normalised at evaluation. origin: (dim,) [m].
+        e: restitution, scalar or (k,). radius [m].
+    """
+
+    body: str = eqx.field(static=True)
+    normal: Vector = eqx.field(converter=as_float)
+    origin: Vector = eqx.field(converter=as_float)
+    e: Vector = eqx.field(converter=as_float)
+    points: Vector | None = eqx.field(converter=lambda x: None if x is None else as_float(x), default=None,
+                                      kw_only=True)
+    nodes: tuple[int, ...] | None = eqx.field(static=True, default=None, kw_only=True,
+                                              converter=lambda x: None if x is None else tuple(int(i) for i in
+                                                                                                np.ravel(x)))
+    radius: Scalar = eqx.field(converter=as_float, default=0.0, kw_only=True)
+
+    ranges = {"e": UNIT_INTERVAL, "radius": Range(0.0)}
+
+    def invalid(self) -> str | None:
+        n = np.asarray(self.normal)
+        if n.ndim != 1 or n.shape[0] not in (1, 2, 3) or not np.linalg.norm(n) > 0:
+            return f"normal must be a non-zero vector of 1, 2 or 3 coordinates, got {n.tolist()}"
+        if np.shape(self.origin) != n.shape:
+            return f"origin must have the normal's {n.shape[0]} coordinates, got shape {np.shape(self.origin)}"
+        if self.points is not None and self.nodes is not None:
+            return "points: give points (rigid body) or nodes (flexible body), not both"
+        if self.points is not None and (np.ndim(self.points) != 2 or np.shape(self.points)[1] != n.shape[0]):
+            return f"points must have shape (k, {n.shape[0]}), got {np.shape(self.points)}"
+        return None
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body,)
+
+    def count(self, bodies) -> int:
+        if self.nodes is not None:
+            return len(self.nodes)
+        return 1 if self.points is None else self.points.shape[-2]
+
+    def evaluate(self, bodies, qs):
+        body, q = bodies[0], qs[0]
+        n = self.normal / jnp.linalg.norm(self.normal)
+        if self.nodes is not None:
+            x = jnp.stack([point(body, q, jnp.zeros((0,)), i) for i in self.nodes])
+        elif self.points is None:
+            x = point(body, q, jnp.zeros((0,)), None)[None]
+        else:
+            x = jax.vmap(lambda X: point(body, q, X, None))(self.points)
+        return (x - self.origin.astype(q.dtype)) @ n.astype(q.dtype) - self.radius
+
+    def restitution(self, bodies) -> Vector:
+        return jnp.broadcast_to(self.e, (self.count(bodies),))
+
+    def is_linear(self, bodies) -> bool:
+        return bodies[0].linear_points
+
+    def invalid_on(self, bodies) -> str | None:
+        body = bodies[0]
+        if body.dim != self.normal.shape[-1]:
+            return f"the body lives in {body.dim} dimensions, the normal has {self.normal.shape[-1]}"
+        if jnp.ndim(self.e) == 1 and self.e.shape[0] != self.count(bodies):
+            return f"e must be one value or one per point ({self.count(bodies)}), got {self.e.shape[0]}"
+        if body.has_nodes and self.nodes is None:
+            return "a flexible body's points are named by nodes = [...]"
+        if not body.has_nodes and self.nodes is not None:
+            return "a rigid body's points are named by points = [[...], ...] (body-frame coordinates)"
+        for i in self.nodes or ():
+            rule = body.invalid_anchor(jnp.zeros((0,)), i)
+            if rule:
+                return rule
+        return None
+
+
+class SphereContact(AbstractContact):
+    """Two spheres (circles in 2D, segments in 1D) of radii ``radius_a`` and
+    ``radius_b`` centred at anchors of two bodies: ``g = |x_a - x_b| - r_a - r_b >= 0``.
+    In 1D the distance is ``side (x_b - x_a)`` with ``side`` = ±1 the order of the two bodies
+    on the line (the ball b on the positive side of a: +1)."""
+
+    body_a: str = eqx.field(static=True)
+    body_b: str = eqx.field(static=True)
+    radius_a: Scalar = eqx.field(converter=as_float)
+    radius_b: Scalar = eqx.field(converter=as_float)
+    e: Scalar = eqx.field(converter=as_float)
+    at_a: Vector = eqx.field(converter=lambda x: jnp.zeros((0,)) if x is None else as_float(x), default=None,
+                             kw_only=True)
+    at_b: Vector = eqx.field(converter=lambda x: jnp.zeros((0,)) if x is None else as_float(x), default=None,
+                             kw_only=True)
+    side: float = eqx.field(static=True, default=1.0, kw_only=True)
+
+    ranges = {"radius_a": Range(0.0), "radius_b": Range(0.0), "e": UNIT_INTERVAL}
+
+    def invalid(self) -> str | None:
+        if self.side not in (1.0, -1.0):
+            return f"side must be +1 or -1, got {self.side}"
+        return None
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body_a, self.body_b)
+
+    def count(self, bodies) -> int:
+        return 1
+
+    def evaluate(self, bodies, qs):
+        xa = point(bodies[0], qs[0], self.at_a, None)
+        xb = point(bodies[1], qs[1], self.at_b, None)
+        if bodies[0].dim == 1:
+            distance = self.side * (xb[0] - xa[0])
+        else:
+            distance = jnp.linalg.norm(xa - xb)
+        return (distance - self.radius_a - self.radius_b)[None]
+
+    def restitution(self, bodies) -> Vector:
+        return jnp.broadcast_to(self.e, (1,))
+
+    def is_linear(self, bodies) -> bool:
+        return bodies[0].dim == 1 and all(b.linear_points for b in bodies)
+
+    def invalid_on(self, bodies) -> str | None:
+        if bodies[0].dim != bodies[1].dim:
+            return f"bodies a and b live in {bodies[0].dim} and {bodies[1].dim} dimensions"
+        for side, b, at in (("a", bodies[0], self.at_a), ("b", bodies[1], self.at_b)):
+            rule = b.invalid_anchor(at, None)
+            if rule:
+                return f"anchor {side}: {rule}"
+        return None
