@@ -170,21 +170,28 @@ def test_model_fields_are_checked(make, match):
 
 def test_model_fields_of_every_scene_are_checked():
     """Every model's declared ranges hold its scene's defaults, and each is enforced."""
+    from nsga_jax.system import SystemModel
+
     for name in REGISTRY:
         scene = load_scene(name)
         model = scene.model
         check_model_fields(model)
-        assert model.ranges, f"{type(model).__name__} declares no ranges"
-        for field, rng in model.ranges.items():
-            bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
-            value = np.full_like(np.asarray(getattr(model, field)), bad)
-            broken = eqx.tree_at(lambda m, f=field: getattr(m, f), model, value)
-            with pytest.raises(nj.ConfigError, match=rf"{type(model).__name__}.{field} must be in"):
-                check_model_fields(broken)
+        # a system's fields are its parts': each part checks its own
+        parts = ([*model.bodies, *model.joints, *model.contacts, *model.forces]
+                 if isinstance(model, SystemModel) else [model])
+        assert any(part.ranges for part in parts), f"{name}: {type(model).__name__} declares no ranges"
+        for part in parts:
+            check_model_fields(part)
+            for field, rng in part.ranges.items():
+                bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
+                value = np.full_like(np.asarray(getattr(part, field)), bad)
+                broken = eqx.tree_at(lambda m, f=field: getattr(m, f), part, value)
+                with pytest.raises(nj.ConfigError, match=rf"{type(part).__name__}.{field} must be in"):
+                    check_model_fields(broken)
 
 
 def test_rigid_body_inertia_must_be_positive_definite():
-    box = load_scene("rigid_box").model
+    box = load_scene("rigid_box").model.body("box")
     broken = eqx.tree_at(lambda m: m.inertia, box, np.diag([1.0, -1.0, 1.0]))
     refused(r"inertia must be positive definite", check_model_fields, broken)
 

@@ -1,4 +1,7 @@
-"""Scene ``bouncing_ball``: a point mass dropped on a floor (exact solution known)."""
+"""Scene ``bouncing_ball``: a point mass dropped on a floor (exact solution known).
+
+Built as a system: a 1D point mass (coordinate z, the height [m]), a plane
+contact with the floor z = 0, and gravity."""
 
 from __future__ import annotations
 
@@ -19,11 +22,15 @@ PARAMETERS = {
 def make(p, concrete):
     import jax.numpy as jnp
 
-    from ..models.point_mass import BouncingBall
+    from ..system import Gravity, PlaneContact, PointMass, System
 
-    model = BouncingBall(m=p["mass"], gravity=p["gravity"], e=p["e"])
-    q0 = jnp.reshape(jnp.asarray(p["height"], float), (1,))
-    v0 = jnp.reshape(jnp.asarray(p["velocity"], float), (1,))
+    height = jnp.reshape(jnp.asarray(p["height"], float), (1,))
+    velocity = jnp.reshape(jnp.asarray(p["velocity"], float), (1,))
+    system = System(dim=1)
+    system.add_body("ball", PointMass(p["mass"], position=height, velocity=velocity))
+    system.add_contact("floor", PlaneContact("ball", normal=[1.0], origin=[0.0], e=p["e"]))
+    system.add_force("gravity", Gravity(-jnp.reshape(jnp.asarray(p["gravity"], float), (1,))))
+    model, q0, v0 = system.build()
 
     def observables(sol):
         z, vz = sol.q[:, 0], sol.v[:, 0]

@@ -1,7 +1,9 @@
 """Scene ``rigid_box``: the paper's §4.1, a spinning rigid box bouncing on a floor.
 
-The rigid body is in natural coordinates (12 coordinates, constant mass matrix,
-6 quadratic rigidity constraints); its 8 vertices are point–plane contacts."""
+Built as a system: a :class:`~nsga_jax.system.RigidBody3D` in natural
+coordinates (12 coordinates, constant mass matrix, 6 quadratic rigidity
+constraints), a plane contact of its 8 vertices with the floor z = 0, and
+gravity."""
 
 from __future__ import annotations
 
@@ -65,24 +67,29 @@ def check(p):
 def make(p, concrete):
     import jax.numpy as jnp
 
-    from ..elements.rigid_body import box_inertia, box_vertices, natural_velocities
-    from ..models.rigid_body import RigidBody
+    from ..elements.rigid_body import box_inertia, box_vertices
+    from ..system import Gravity, PlaneContact, RigidBody3D, System
 
     sides = _sides(p)
     vertices = box_vertices(sides)
     R0 = rotation(p["roll"], p["pitch"])
     r0 = jnp.stack([jnp.asarray(p[k], float) for k in ("x0", "y0", "z0")])
-    model = RigidBody(
-        mass_=p["mass"], inertia=box_inertia(p["mass"], sides), points=vertices, gravity=p["gravity"],
-        floor_z=0.0, e=jnp.full(8, p["e"]), size=0.5 * jnp.linalg.norm(sides), contact=concrete["floor"] == "on",
-    )
-    q0 = jnp.concatenate([r0, R0[:, 0], R0[:, 1], R0[:, 2]])
     omega0 = R0 @ jnp.stack([jnp.asarray(p[k], float) for k in ("omega_x", "omega_y", "omega_z")])
-    v0 = natural_velocities(R0, omega0, jnp.stack([jnp.asarray(p[k], float) for k in ("vx0", "vy0", "vz0")]))
+    system = System(dim=3)
+    system.add_body("box", RigidBody3D(
+        p["mass"], box_inertia(p["mass"], sides), position=r0, rotation=R0,
+        velocity=jnp.stack([jnp.asarray(p[k], float) for k in ("vx0", "vy0", "vz0")]), angular_velocity=omega0,
+        size=0.5 * jnp.linalg.norm(sides)))
+    if concrete["floor"] == "on":
+        system.add_contact("floor", PlaneContact("box", normal=[0.0, 0.0, 1.0], origin=[0.0, 0.0, 0.0],
+                                                 e=jnp.full(8, p["e"]), points=vertices))
+    system.add_force("gravity", Gravity(jnp.stack([jnp.zeros(()), jnp.zeros(()), -jnp.asarray(p["gravity"], float)])))
+    model, q0, v0 = system.build()
 
     def observables(sol):
-        q, v = sol.q, sol.v
-        M = model.mass(q0)
+        box = model.coordinates("box")
+        q, v = sol.q[:, box], sol.v[:, box]
+        M = model.body("box").mass(q0[box])
         R = jnp.stack([q[:, 3:6], q[:, 6:9], q[:, 9:12]], axis=2)
         Rdot = jnp.stack([v[:, 3:6], v[:, 6:9], v[:, 9:12]], axis=2)
         omega = 0.5 * sum(jnp.cross(R[:, :, i], Rdot[:, :, i]) for i in range(3))

@@ -1,5 +1,9 @@
 """Scene ``rigid_pendulum``: a point mass on a rigid rod (a nonlinear bilateral
-constraint in Cartesian coordinates) swinging against a vertical wall."""
+constraint in Cartesian coordinates) swinging against a vertical wall.
+
+Built as a system: a planar point mass (x, y) [m], a ``Distance`` joint of
+the rod's length to the pivot at the ground's origin, a plane contact with
+the wall (normal towards the side where the mass starts), and gravity."""
 
 from __future__ import annotations
 
@@ -36,13 +40,18 @@ def check(p):
 def make(p, concrete):
     import jax.numpy as jnp
 
-    from ..models.point_mass import RigidPendulum
+    from ..system import Distance, Gravity, PlaneContact, PointMass, System
 
     length, th, om = p["length"], p["angle"], p["omega"]
-    q0 = jnp.stack([length * jnp.sin(th), -length * jnp.cos(th)])
-    v0 = length * om * jnp.stack([jnp.cos(th), jnp.sin(th)])
     side = _side(concrete)
-    model = RigidPendulum(m=p["mass"], length=length, gravity=p["gravity"], wall_x=p["wall_x"], side=side, e=p["e"])
+    system = System(dim=2)
+    system.add_body("bob", PointMass(p["mass"], position=length * jnp.stack([jnp.sin(th), -jnp.cos(th)]),
+                                     velocity=length * om * jnp.stack([jnp.cos(th), jnp.sin(th)])))
+    system.add_joint("rod", Distance("bob", "ground", length=length))
+    wall = jnp.stack([jnp.asarray(p["wall_x"], float), jnp.zeros(())])
+    system.add_contact("wall", PlaneContact("bob", normal=[side, 0.0], origin=wall, e=p["e"]))
+    system.add_force("gravity", Gravity(jnp.stack([jnp.zeros(()), -jnp.asarray(p["gravity"], float)])))
+    model, q0, v0 = system.build()
 
     def observables(sol):
         x, y, vx, vy = sol.q[:, 0], sol.q[:, 1], sol.v[:, 0], sol.v[:, 1]

@@ -11,11 +11,14 @@ from .contacts import PlaneContact, SphereContact
 from .flexible import Beam2D
 from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
 from .joints import Distance, Pin, Slider, Weld
+from .joints3d import Revolute, Weld3D
 from .model import SystemModel
+from .rigid3d import RigidBody3D
 
 __all__ = [
     "GROUND", "AbstractBody", "AbstractContact", "AbstractForce", "AbstractJoint", "Ground",
     "PointMass", "RigidBody2D", "Beam2D", "System", "check_initial_state", "PlaneContact", "SphereContact",
     "Gravity", "PrescribedForce", "SpringDamper", "TorsionalSpring", "Distance", "Pin", "Slider", "Weld",
+    "RigidBody3D", "Revolute", "Weld3D",
     "SystemModel",
 ]
