@@ -42,6 +42,11 @@ LONG = {
     # Tests of 4 s or more on a 2-core machine (pytest --durations), run by `pytest -m slow`
     # (CI runs both suites); each feature keeps a quicker test in the default run.
     "test_assembly.py::test_fast_path_equals_generic_path",
+    "test_system_rigid.py::test_system_run_equals_the_hand_written_model",
+    "test_system_rigid.py::test_revolute_joint_holds_and_keeps_the_motion_in_its_plane",
+    "test_system_rigid.py::test_spherical_joint_holds_and_keeps_the_vertical_angular_momentum",
+    "test_system_rigid.py::test_welded_bodies_move_as_one",
+    "test_system_rigid.py::test_model_functions_equal_the_hand_written_ones[rigid_box]",
     "test_cli.py::test_later_runs_load_compiled_programs_from_the_cache",
     "test_extreme.py::test_box_dropped_flat_lands_on_four_vertices_at_once",
     "test_extreme.py::test_stiff_bar_at_a_large_step",

@@ -30,7 +30,8 @@ def make(p, concrete):
     system.add_body("ball", PointMass(p["mass"], position=height, velocity=velocity))
     system.add_contact("floor", PlaneContact("ball", normal=[1.0], origin=[0.0], e=p["e"]))
     system.add_force("gravity", Gravity(-jnp.reshape(jnp.asarray(p["gravity"], float), (1,))))
-    model, q0, v0 = system.build()
+    model = system.model()  # the scene's parameters and check() rule out an inconsistent initial state
+    q0, v0 = model.initial_state()
 
     def observables(sol):
         z, vz = sol.q[:, 0], sol.v[:, 0]

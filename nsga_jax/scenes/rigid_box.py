@@ -84,7 +84,8 @@ def make(p, concrete):
         system.add_contact("floor", PlaneContact("box", normal=[0.0, 0.0, 1.0], origin=[0.0, 0.0, 0.0],
                                                  e=jnp.full(8, p["e"]), points=vertices))
     system.add_force("gravity", Gravity(jnp.stack([jnp.zeros(()), jnp.zeros(()), -jnp.asarray(p["gravity"], float)])))
-    model, q0, v0 = system.build()
+    model = system.model()  # the scene's parameters and check() rule out an inconsistent initial state
+    q0, v0 = model.initial_state()
 
     def observables(sol):
         box = model.coordinates("box")

@@ -51,7 +51,8 @@ def make(p, concrete):
     wall = jnp.stack([jnp.asarray(p["wall_x"], float), jnp.zeros(())])
     system.add_contact("wall", PlaneContact("bob", normal=[side, 0.0], origin=wall, e=p["e"]))
     system.add_force("gravity", Gravity(jnp.stack([jnp.zeros(()), -jnp.asarray(p["gravity"], float)])))
-    model, q0, v0 = system.build()
+    model = system.model()  # the scene's parameters and check() rule out an inconsistent initial state
+    q0, v0 = model.initial_state()
 
     def observables(sol):
         x, y, vx, vy = sol.q[:, 0], sol.q[:, 1], sol.v[:, 0], sol.v[:, 1]

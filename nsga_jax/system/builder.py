@@ -20,6 +20,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
+import equinox as eqx
 import numpy as np
 
 from .._custom_types import Vector
@@ -105,6 +106,13 @@ class System:
         return model, q0, v0
 
 
+@eqx.filter_jit
+def _violations(model: SystemModel, q0: Vector, v0: Vector):
+    """``(g(q0), g_q(q0) v0)`` in one compiled program: evaluated op by op, the
+    part-level Jacobians cost seconds of dispatch and compilation of each op."""
+    return model.constraints(q0), model.constraint_jacobian(q0) @ v0
+
+
 def check_initial_state(model: SystemModel, q0: Vector, v0: Vector, *, tolerance: float = 1e-9) -> None:
     """Refuse, by name, an initial state that violates a joint (position or
     velocity level, beyond ``tolerance`` times the system's size) or
@@ -117,8 +125,7 @@ def check_initial_state(model: SystemModel, q0: Vector, v0: Vector, *, tolerance
     q0, v0 = jnp.asarray(q0, float), jnp.asarray(v0, float)
     scale = max(1.0, float(jnp.abs(q0).max(initial=0.0)))
     own = sum(b.n_bilateral for b in model.bodies)
-    g = np.asarray(model.constraints(q0))
-    w = np.asarray(model.constraint_jacobian(q0) @ v0)
+    g, w = (np.asarray(x) for x in _violations(model, q0, v0))
     if own and np.abs(g[:own]).max() > tolerance * scale:
         worst = model.body_names[0]
         start = 0

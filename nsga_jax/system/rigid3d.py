@@ -94,7 +94,7 @@ class RigidBody3D(AbstractBody):
         J = np.asarray(self.inertia)
         if J.shape != (3, 3) or not np.allclose(J, J.T, rtol=1e-12, atol=0.0):
             return f"inertia must be 3 principal values or a symmetric (3, 3) tensor [kg m^2], got {J.tolist()}"
-        moments = np.linalg.eigvalsh(np.asarray(second_moments(self.inertia)))
+        moments = np.linalg.eigvalsh(0.5 * np.trace(J) * np.eye(3) - J)  # second_moments, in NumPy
         if np.linalg.eigvalsh(J).min() <= 0 or moments.min() <= 0:
             return (f"inertia must be positive definite with principal values obeying the triangle inequality "
                     f"strictly (J1 < J2 + J3, ...; a flat body has a singular mass matrix), got eigenvalues "
