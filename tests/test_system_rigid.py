@@ -56,8 +56,8 @@ def test_model_functions_equal_the_hand_written_ones(name):
     for fn, args in (("mass", (q,)), ("force", (q, v, 0.3)), ("constraints", (q,)), ("constraint_jacobian", (q,)),
                      ("constraint_curvature", (q, mu)), ("velocity_constraint_gradient", (q, v))):
         expected = getattr(old, fn)(*args)  # round-off: a dot product may fuse its multiply-adds
-        np.testing.assert_allclose(getattr(new, fn)(*args), expected, rtol=0, atol=1e-15 * max(1.0, np.abs(expected).max()),
-                                   err_msg=fn)
+        scale = max(1.0, float(np.abs(expected).max()))
+        np.testing.assert_allclose(getattr(new, fn)(*args), expected, rtol=0, atol=1e-15 * scale, err_msg=fn)
     np.testing.assert_array_equal(new.restitution, old.restitution)
     assert float(new.mbar) == float(old.mbar)
     assert new.energy(q, v) == pytest.approx(float(old.energy(q, v)), rel=1e-14)
