@@ -277,9 +277,7 @@ class ConstantJacobian(AbstractConstraintJacobian):
 
 def curvature(model: Model, q: Vector, mu: jax.Array) -> Matrix:
     """d(g_q(q)^T mu)/dq at fixed mu (mu over all nc constraints); zero if affine."""
-    if model.linear_constraints or model.n_constraints == 0:
-        return jnp.zeros((model.n_dof, model.n_dof), q.dtype)
-    return jax.jacfwd(lambda x: model.constraint_jacobian(x).T @ mu)(q)
+    return model.constraint_curvature(q, mu)  # a model may sum it part by part
 
 
 def convective(model: Model, q: Vector, v: Vector, bilateral_only: bool = False) -> jax.Array:

@@ -216,6 +216,36 @@ class SystemModel(Model):
             blocks.append(block)
         return jnp.concatenate(blocks) if blocks else jnp.zeros((0, n), q.dtype)
 
+    def constraint_curvature(self, q: Vector, mu: ConstraintVector) -> Matrix:
+        """d(g_q^T mu)/dq (n, n), summed from each part's own Hessian contracted
+        with its rows of ``mu``: the global ``jacfwd`` of the assembled g_q
+        would materialise an (n, nc, n) tensor."""
+        n, slices = self.n_dof, self._slices()
+        out = jnp.zeros((n, n), q.dtype)
+        if self.linear_constraints or self.n_constraints == 0:
+            return out
+        start = 0
+        for b, name in zip(self.bodies, self.body_names):
+            if b.n_bilateral:
+                rows = mu[start:start + b.n_bilateral]
+                local = jax.jacfwd(lambda x, b=b, rows=rows: jax.jacfwd(b.bilateral)(x).T @ rows)(q[slices[name]])
+                out = out.at[slices[name], slices[name]].add(local)
+                start += b.n_bilateral
+        for part in self._constraint_parts():
+            bodies = self._bodies_of(part)
+            count = part.count(bodies)
+            rows = mu[start:start + count]
+            start += count
+
+            def pulled(qs, part=part, bodies=bodies, rows=rows):
+                return tuple(J.T @ rows for J in jax.jacfwd(lambda x: part.evaluate(bodies, x))(qs))
+
+            local = jax.jacfwd(pulled)(self._gather(q, part))
+            for i, row in enumerate(part.bodies):
+                for j, col in enumerate(part.bodies):
+                    out = out.at[slices[row], slices[col]].add(local[i][j])
+        return out
+
     # -------------------------------------------------------------- monitors
     def energy(self, q: Vector, v: Vector) -> Scalar:
         """Kinetic + strain energy of the bodies, plus the potential of every
