@@ -61,6 +61,8 @@ def test_model_functions_equal_the_hand_written_ones(name):
     np.testing.assert_array_equal(new.restitution, old.restitution)
     assert float(new.mbar) == float(old.mbar)
     assert new.energy(q, v) == pytest.approx(float(old.energy(q, v)), rel=1e-14)
+    speed = old.angular_speed(q, v)  # the coarse-step warning's rate: the box's |ω|, the pendulum rod's |v| / l
+    assert new.angular_speed(q, v) == (None if speed is None else pytest.approx(speed, rel=1e-14))
 
 
 def _same_run(name, overrides):

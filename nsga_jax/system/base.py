@@ -222,6 +222,12 @@ class AbstractConstraint(AbstractPart):
         """Why the constraint cannot act on these bodies (wrong anchors, dimensions), or ``None``."""
         return None
 
+    def angular_speed(self, bodies: tuple[AbstractBody, ...], qs: tuple[Vector, ...],
+                      vs: tuple[Vector, ...]) -> Scalar | None:
+        """Angular speed [rad/s] of what the constraint makes turn (a rod), for
+        the coarse-step warning; ``None`` where nothing turns."""
+        return None
+
 
 class AbstractJoint(AbstractConstraint):
     """A bilateral constraint: g(q) = 0."""

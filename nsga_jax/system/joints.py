@@ -10,6 +10,7 @@ natural coordinates are).
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -82,6 +83,11 @@ class Distance(AbstractTwoPointJoint):
 
     def is_linear(self, bodies) -> bool:
         return False
+
+    def angular_speed(self, bodies, qs, vs):
+        """The rod's angular speed ``|v_a - v_b| / L`` [rad/s] (its length held)."""
+        _, (va, vb) = jax.jvp(lambda qa, qb: self.points(bodies, (qa, qb)), qs, vs)
+        return jnp.linalg.norm(va - vb) / self.length
 
 
 class Weld(AbstractTwoPointJoint):

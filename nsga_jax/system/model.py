@@ -262,7 +262,9 @@ class SystemModel(Model):
         return all(f.conservative for f in self.forces)
 
     def angular_speed(self, q: Vector, v: Vector) -> float | None:
-        speeds = [s for s in self._per_body(lambda b, qb, vb: b.angular_speed(qb, vb), q, v) if s is not None]
+        speeds = self._per_body(lambda b, qb, vb: b.angular_speed(qb, vb), q, v)
+        speeds += [j.angular_speed(self._bodies_of(j), self._gather(q, j), self._gather(v, j)) for j in self.joints]
+        speeds = [s for s in speeds if s is not None]
         return float(max(speeds)) if speeds else None
 
     # ----------------------------------------------------------------- access
