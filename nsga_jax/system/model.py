@@ -15,6 +15,8 @@ against the functions, as for any model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -199,22 +201,80 @@ class SystemModel(Model):
         rows = [c.restitution(self._bodies_of(c)) for c in self.contacts]
         return jnp.concatenate(rows) if rows else jnp.zeros((0,))
 
+    def _row_blocks(self, bilateral_only: bool = False) -> list[tuple[slice, tuple[str, ...], Callable, bool]]:
+        """Every block of constraint rows: ``(rows, body names, fn(qs) -> values,
+        is_linear)``: the bodies' own constraints, then the joints, then the contacts."""
+        blocks: list[tuple[slice, tuple[str, ...], Callable, bool]] = []
+        start = 0
+        for body, name in zip(self.bodies, self.body_names):
+            if body.n_bilateral:
+                blocks.append((slice(start, start + body.n_bilateral), (name,),
+                               lambda qs, body=body: body.bilateral(qs[0]), False))
+                start += body.n_bilateral
+        parts = self.joints if bilateral_only else self._constraint_parts()
+        for part in parts:
+            bodies = self._bodies_of(part)
+            count = part.count(bodies)
+            evaluate: Callable = lambda qs, part=part, bodies=bodies: part.evaluate(bodies, qs)  # noqa: E731
+            blocks.append((slice(start, start + count), part.bodies, evaluate, part.is_linear(bodies)))
+            start += count
+        return blocks
+
+    def _gather_names(self, x: Vector, names: tuple[str, ...]) -> tuple[Vector, ...]:
+        slices = self._slices()
+        return tuple(x[slices[name]] for name in names)
+
+    def _scatter_rows(self, rows: int, names: tuple[str, ...], columns, dtype) -> Matrix:
+        """A (rows, n) block from per-body column blocks (rows, k_b)."""
+        slices = self._slices()
+        block = jnp.zeros((rows, self.n_dof), dtype)
+        for name, column in zip(names, columns):
+            block = block.at[:, slices[name]].add(column)
+        return block
+
+    def _jacobian_rows(self, q: Vector, bilateral_only: bool) -> Matrix:
+        blocks = [self._scatter_rows(rows.stop - rows.start, names, jax.jacfwd(fn)(self._gather_names(q, names)),
+                                     q.dtype)
+                  for rows, names, fn, _ in self._row_blocks(bilateral_only)]
+        return jnp.concatenate(blocks) if blocks else jnp.zeros((0, self.n_dof), q.dtype)
+
     def constraint_jacobian(self, q: Vector) -> Matrix:
         """g_q (nc, n), assembled from each part's ``jax.jacfwd`` on its own bodies' coordinates."""
+        return self._jacobian_rows(q, bilateral_only=False)
+
+    def bilateral_jacobian(self, q: Vector) -> Matrix:
+        """g_q^B (nb, n), part by part."""
+        return self._jacobian_rows(q, bilateral_only=True)
+
+    def constraint_curvature(self, q: Vector, mu: ConstraintVector) -> Matrix:
+        """d(g_q^T mu)/dq (n, n): each nonlinear part's Hessian of ``mu · g`` on its
+        own bodies' coordinates (affine parts add nothing)."""
         n, slices = self.n_dof, self._slices()
+        H = jnp.zeros((n, n), q.dtype)
+        for rows, names, fn, linear in self._row_blocks():
+            if linear:
+                continue
+            local = jax.hessian(lambda qs, fn=fn, rows=rows: mu[rows] @ fn(qs))(self._gather_names(q, names))
+            for i, row in enumerate(names):
+                for j, col in enumerate(names):
+                    H = H.at[slices[row], slices[col]].add(local[i][j])
+        return H
+
+    def velocity_constraint_gradient(self, q: Vector, v: Vector, bilateral_only: bool = False) -> Matrix:
+        """G^s = d(g_q v)/dq (nc or nb, n) (eq. 50), part by part (affine parts: zero rows)."""
         blocks = []
-        for b, name in zip(self.bodies, self.body_names):
-            if b.n_bilateral:
-                local = jax.jacfwd(b.bilateral)(q[slices[name]])
-                blocks.append(jnp.zeros((b.n_bilateral, n), q.dtype).at[:, slices[name]].set(local))
-        for part in self._constraint_parts():
-            bodies = self._bodies_of(part)
-            local = jax.jacfwd(lambda qs, part=part, bodies=bodies: part.evaluate(bodies, qs))(self._gather(q, part))
-            block = jnp.zeros((part.count(bodies), n), q.dtype)
-            for name, column in zip(part.bodies, local):
-                block = block.at[:, slices[name]].add(column)
-            blocks.append(block)
-        return jnp.concatenate(blocks) if blocks else jnp.zeros((0, n), q.dtype)
+        for rows, names, fn, linear in self._row_blocks(bilateral_only):
+            count = rows.stop - rows.start
+            if linear:
+                blocks.append(jnp.zeros((count, self.n_dof), q.dtype))
+                continue
+            vs = self._gather_names(v, names)
+
+            def rate(qs, fn=fn, vs=vs):
+                return jax.jvp(fn, (qs,), (vs,))[1]
+
+            blocks.append(self._scatter_rows(count, names, jax.jacfwd(rate)(self._gather_names(q, names)), q.dtype))
+        return jnp.concatenate(blocks) if blocks else jnp.zeros((0, self.n_dof), q.dtype)
 
     # -------------------------------------------------------------- monitors
     def energy(self, q: Vector, v: Vector) -> Scalar:
