@@ -194,3 +194,60 @@ def test_rows_and_coordinates_name_the_parts():
     q, _ = random_state(model)
     np.testing.assert_array_equal(model.constraints(q)[model.rows("contacts", "floor")],
                                   q[model.coordinates("beam")][jnp.array([4, 7])] + 0.5)
+
+
+def chain(n_links: int, length: float = 0.3) -> System:
+    """Links pinned in series: many parts of one kind, evaluated as groups."""
+    s = System(dim=2, gravity=[0.0, -9.81])
+    for i in range(n_links):
+        s.add_body(f"l{i}", RigidBody2D(1.0 + 0.1 * i, 0.01, [(i + 0.5) * length, 0.0]))
+        s.add_joint(f"p{i}", Pin("ground" if i == 0 else f"l{i - 1}", f"l{i}", at_a=[0.0 if i == 0 else length / 2, 0.0],
+                                 at_b=[-length / 2, 0.0]))
+        s.add_force(f"k{i}", TorsionalSpring("ground" if i == 0 else f"l{i - 1}", f"l{i}", 2.0 + i, damping=0.1))
+    s.add_contact("wall", PlaneContact(f"l{n_links - 1}", normal=[1.0, 0.0], origin=[-1.0, 0.0], e=0.5,
+                                       points=[[length / 2, 0.0], [-length / 2, 0.0]]))
+    return s
+
+
+@pytest.mark.parametrize("system", [chain(4), mechanism()], ids=["chain", "mechanism"])
+def test_second_derivatives_against_finite_differences(system):
+    """The curvature d(g_q^T mu)/dq and G^s = d(g_q v)/dq (eq. 50), part by part
+    and in groups, against differences of the constraint Jacobian."""
+    model = system.model()
+    q, v = random_state(model, seed=1)
+    mu = jnp.asarray(np.random.default_rng(2).standard_normal(model.n_constraints))
+    G = jax.jit(lambda x: model.constraint_jacobian(x))
+    np.testing.assert_allclose(model.constraint_curvature(q, mu), central_difference(lambda x: G(x).T @ mu, q),
+                               rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(model.velocity_constraint_gradient(q, v), central_difference(lambda x: G(x) @ v, q),
+                               rtol=1e-5, atol=1e-6)
+    nb = model.n_bilateral
+    np.testing.assert_allclose(model.velocity_constraint_gradient(q, v, bilateral_only=True),
+                               model.velocity_constraint_gradient(q, v)[:nb], rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(model.bilateral_jacobian(q), G(q)[:nb], rtol=1e-12, atol=1e-14)
+
+
+def test_grouped_parts_equal_their_members_one_by_one():
+    """A chain's pins, torsional springs and bodies, evaluated by one vmap per
+    kind, against each part evaluated alone."""
+    model = chain(5).model()
+    q, v = random_state(model, seed=3)
+    slices = [model.coordinates(name) for name in model.body_names]
+    one_by_one = []
+    for joint in model.joints:
+        bodies = tuple(model.body(name) for name in joint.bodies)
+        one_by_one.append(joint.evaluate(bodies, tuple(q[model.coordinates(n)] if n != "ground" else q[:0]
+                                                       for n in joint.bodies)))
+    np.testing.assert_allclose(model.bilateral(q), jnp.concatenate(one_by_one), rtol=1e-14, atol=1e-15)
+    f = jnp.zeros_like(q)
+    for force in model.forces:
+        bodies = tuple(model.body(name) for name in force.bodies)
+        local = force.generalized(bodies, tuple(q[model.coordinates(n)] if n != "ground" else q[:0]
+                                                for n in force.bodies),
+                                  tuple(v[model.coordinates(n)] if n != "ground" else v[:0] for n in force.bodies), 0.0)
+        for name, fb in zip(force.bodies, local):
+            if name != "ground":
+                f = f.at[model.coordinates(name)].add(fb)
+    np.testing.assert_allclose(model.force(q, v, 0.0), f, rtol=1e-13, atol=1e-13)
+    M = jax.scipy.linalg.block_diag(*[model.body(n).mass(q[s]) for n, s in zip(model.body_names, slices)])
+    np.testing.assert_array_equal(model.mass(q), M)
