@@ -56,7 +56,7 @@ from ..results import ConfigError
 from ..system.base import AbstractBody
 from ..system.catalog import CATALOG, STRUCTURE_KINDS, Field, fields
 from .base import REGISTRY, SceneSpec, register
-from .params import SOLVER_PARAMS, Param, check_all
+from .params import SOLVER_PARAMS, Param
 
 TABLES = ("system", "bodies", "joints", "contacts", "forces", "solver")
 """The top-level tables of a system file."""
@@ -306,11 +306,11 @@ def _parse_system(path: Path, data: dict[str, Any]) -> tuple[str, str, SystemDes
                 if isinstance(ref, str) and ref != GROUND and ref not in bodies:
                     raise ConfigError(f"{p.path}.{key} = {ref!r} names a body that does not exist; bodies: "
                                       f"{', '.join(bodies)} (and ground)")
-    try:
-        solver = check_all("solver", SOLVER_PARAMS, data.get("solver", {}))
-    except ConfigError as err:
-        raise ConfigError(f"solver: {err}") from None
-    given = {k: solver[k] for k in data.get("solver", {})}
+    given = {}
+    for key, value in data.get("solver", {}).items():
+        if key not in SOLVER_PARAMS:
+            raise ConfigError(f"solver: unknown key {key!r}; allowed: {', '.join(SOLVER_PARAMS)}")
+        given[key] = SOLVER_PARAMS[key].check(f"solver.{key}", value)
     return name, description, SystemDescription(dim, gravity is not None, tuple(parts), parameters), given
 
 
@@ -457,13 +457,15 @@ def spec_from_file(path: str | Path) -> SceneSpec:
 
     positions = tuple(k for k, u in units.items() if u in ("m", "rad") and not k.endswith((".gap", ".violation")))
     gaps = tuple(k for k in units if k.endswith(".gap"))
-    plotted = (positions[:6] + gaps[:2] + (("energy",) if "energy" in units else ()))
+    plotted = (positions[:6] + gaps[:3] + (("energy",) if "energy" in units else ()))
     return SceneSpec(name=name, description=description, parameters=parsed.parameters, solver_defaults=solver,
                      make=make, check=check, observables=names, error_observables=positions, units=units,
                      plotted=plotted)
 
 
 _FILES: dict[Path, tuple[tuple[int, int], SceneSpec]] = {}
+_FILE_NAMES: set[str] = set()
+"""The scene names system files registered (which a later system file may take over)."""
 
 
 def load_system_file(path: str | Path) -> str:
@@ -482,9 +484,10 @@ def load_system_file(path: str | Path) -> str:
         _FILES[key] = (stamp, spec_from_file(path))
     spec = _FILES[key][1]
     held = REGISTRY.get(spec.name)
-    if held is not None and held is not spec and not any(held is s for _, s in _FILES.values()):
+    if held is not None and held is not spec and spec.name not in _FILE_NAMES:
         raise ConfigError(f"{path}: the scene name {spec.name!r} is a built-in scene's; set [system] name = ... "
                           "to another name")
+    _FILE_NAMES.add(spec.name)
     register(spec)
     return spec.name
 
