@@ -132,6 +132,9 @@ def _system_files(ns):
     assert sol.stats["failed_steps"] == 0 and scene.parameters["contacts.floor.e"] == 0.8
     assert float(sol.observables["floor.gap"].min()) > -1e-10  # it bounced, and never sank in
     assert abs(float(ns["grad"]) - 0.6) < 1e-9
+    from nsga_jax.scenes import REGISTRY
+
+    REGISTRY.pop("drop")  # the page's scene stays out of the other tests' registry
 
 
 CHECKS = {

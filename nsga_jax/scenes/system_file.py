@@ -491,7 +491,9 @@ def spec_from_file(path: str | Path) -> SceneSpec:
 
     positions = tuple(k for k, u in units.items() if u in ("m", "rad") and not k.endswith((".gap", ".violation")))
     gaps = tuple(k for k in units if k.endswith(".gap"))
-    plotted = (positions[:6] + gaps[:3] + (("energy",) if "energy" in units else ()))
+    energy = ("energy",) if "energy" in units else ()
+    plotted = (gaps[:3] + energy)
+    plotted = positions[:9 - len(plotted)] + plotted  # at most 9 panels
     return SceneSpec(name=name, description=description, parameters=parsed.parameters, solver_defaults=solver,
                      make=make, check=check, observables=names, error_observables=positions, units=units,
                      plotted=plotted)
