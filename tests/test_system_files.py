@@ -96,6 +96,19 @@ def test_dotted_overrides_change_the_model():
     assert scene.parameters["bodies.ball.mass"] == 2.0
 
 
+@pytest.mark.usefixtures("no_compilation")
+def test_a_whole_vector_sets_its_components():
+    configured = configure(BALL, {"bodies.ball.velocity": [-1.0, 2.0], "system.gravity": [0.0, -1.62]})
+    assert configured.parameters["bodies.ball.velocity.0"] == -1.0
+    assert configured.parameters["bodies.ball.velocity.1"] == 2.0
+    assert configured.parameters["system.gravity.1"] == -1.62
+    with pytest.raises(ConfigError, match=r"bodies.ball.velocity has the components bodies.ball.velocity.0, "
+                                          r"bodies.ball.velocity.1; got \[1.0, 2.0, 3.0\]"):
+        configure(BALL, {"bodies.ball.velocity": [1.0, 2.0, 3.0]})
+    with pytest.raises(ConfigError, match=r"bodies.ball.velocity.1 must be a number, got str 'up'"):
+        configure(BALL, {"bodies.ball.velocity": [1.0, "up"]})
+
+
 def test_the_file_builds_the_model_a_python_system_builds():
     scene = load_scene(PENDULUM)
     system = System(2, gravity=[0.0, -9.81])

@@ -297,7 +297,7 @@ def configure(name_or_path: str | Path, overrides: dict[str, Any] | None = None)
     solver_in: dict[str, Any] = {}
     name, path = resolve_scene(name_or_path)
     if path is not None:
-        from .system_file import flatten
+        from .system_file import flatten  # dotted [parameters] keys of a system file's config
 
         data = _read_config(path)
         name, inner = resolve_scene(data["scene"], relative_to=path.parent)
@@ -308,7 +308,10 @@ def configure(name_or_path: str | Path, overrides: dict[str, Any] | None = None)
         solver_in.update(data.get("solver", {}))
     spec = REGISTRY[name]
     solver_specs = spec.solver_specs()
-    for key, value in (overrides or {}).items():
+    from .system_file import expand_components
+
+    params_in = expand_components(params_in, spec.parameters)
+    for key, value in expand_components(overrides or {}, spec.parameters).items():
         if key in spec.parameters:
             params_in[key] = value
         elif key in solver_specs:

@@ -541,5 +541,24 @@ def flatten(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-__all__ = ["PART_KINDS", "SYSTEM_KEYS", "TABLES", "PartEntry", "SystemDescription", "build_system", "flatten",
+def expand_components(values: dict[str, Any], parameters: dict[str, Any]) -> dict[str, Any]:
+    """A whole vector or matrix given for a path whose components are the
+    parameters (``bodies.ball.velocity = [1.0, 0.0]``) as those components
+    (``bodies.ball.velocity.0``, ``.1``); other keys unchanged."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        if not isinstance(value, list) or key in parameters or f"{key}.0" not in parameters:
+            out[key] = value
+            continue
+        array = _numbers(key, value, "")
+        paths = _component_paths(key, array.shape)
+        expected = sorted(k for k in parameters if k.startswith(f"{key}.") and k[len(key) + 1:][:1].isdigit())
+        if sorted(paths) != expected:
+            raise ConfigError(f"{key} has the components {', '.join(expected)}; got {value!r} (shape {array.shape})")
+        out.update(zip(paths, array.reshape(-1).tolist()))
+    return out
+
+
+__all__ = ["PART_KINDS", "SYSTEM_KEYS", "TABLES", "PartEntry", "SystemDescription", "build_system",
+           "expand_components", "flatten",
            "is_system_file", "load_system_file", "observable_units", "observables_of", "spec_from_file"]
