@@ -228,14 +228,27 @@ def test_a_changed_file_is_read_again(tmp_path):
 
 
 @pytest.mark.usefixtures("no_compilation")
-@pytest.mark.parametrize("command", [["run"], ["sweep", "--grid", "contacts.floor.e=0:1:3"],
-                                     ["identify", "--params", "bodies.ball.mass", "--synthetic"]])
-def test_cli_refuses_a_bad_file_in_one_line(tmp_path, capsys, command):
-    path = _variant(tmp_path, BALL, 'body = "ball"', 'body = "bal"', name="bad.toml")
+@pytest.mark.parametrize("command, old, new, fragment", [
+    (["run"], 'body = "ball"', 'body = "bal"', "contacts.floor.body = 'bal' names a body that does not exist"),
+    (["run"], "mass = 0.5 ", "mas = 0.5 ", "bodies.ball: unknown key 'mas'"),
+    (["run"], 'type = "plane"', 'type = "wall"', "contacts.floor.type: unknown contact type 'wall'"),
+    (["run", "--set", "bodies.ball.position.1=0.05"], "", "", "contacts.floor: initial penetration of 0.05 m"),
+    (["run", "--set", "bodies.ball.mass=heavy"], "", "", "bodies.ball.mass [kg] must be a number, got 'heavy'"),
+    (["sweep", "--grid", "contacts.floor.e=0:1:3"], "e = 0.8", 'e = "high"', "contacts.floor.e must be a number"),
+    (["sweep", "--grid", "contacts.floor.e=0:2:3"], "", "", "contacts.floor.e must be in [0, 1], got 2.0"),
+    (["identify", "--params", "bodies.ball.mass", "--synthetic"], "h = 1e-3", "h = -1e-3",
+     "solver.h [s] must be in (0, inf), got -0.001"),
+    (["identify", "--params", "bodies.ball.position", "--synthetic"], "", "",
+     "--params: 'bodies.ball.position' is not a float parameter"),
+    (["convergence", "--h", "1e-2", "--ref-h", "1e-3"], "[bodies.ball]", "[bodies.ball]\nspin = 1",
+     "bodies.ball: unknown key 'spin'"),
+])
+def test_cli_refuses_a_bad_file_in_one_line(tmp_path, capsys, command, old, new, fragment):
+    path = _variant(tmp_path, BALL, old, new, name="bad.toml")
     rc = main([command[0], str(path), *command[1:], "--out", str(tmp_path / "out")])
     assert rc == EXIT_INPUT
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and err.startswith("error: ") and "contacts.floor.body = 'bal'" in err
+    assert err.count("\n") == 0 and err.startswith("error: ") and fragment in err, err
 
 
 BEAM = """

@@ -89,8 +89,10 @@ def component_paths(path: str, shape: tuple[int, ...]) -> list[str]:
 def _float_params(path: str, array: np.ndarray, doc: str, field: Field) -> dict[str, Param]:
     rng = field.range
     out = {}
-    for sub, x in zip(component_paths(path, array.shape), array.reshape(-1)):
-        p = Param(float(x), doc, field.unit, lo=rng.lo, hi=rng.hi, lo_open=rng.lo_open, hi_open=rng.hi_open)
+    indices = list(np.ndindex(*array.shape))
+    for sub, x, index in zip(component_paths(path, array.shape), array.reshape(-1), indices):
+        text = doc + "".join(f"[{i}]" for i in index)
+        p = Param(float(x), text, field.unit, lo=rng.lo, hi=rng.hi, lo_open=rng.lo_open, hi_open=rng.hi_open)
         p.check(sub, float(x))
         out[sub] = p
     return out
