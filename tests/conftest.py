@@ -78,6 +78,7 @@ LONG = {
     "test_system_files.py::test_a_system_file_runs",
     "test_system_files.py::test_a_sweep_over_a_dotted_path",
     "test_system_files.py::test_identify_recovers_a_dotted_parameter",
+    "test_system_files.py::test_convergence_of_a_system_file",
     "test_performance.py::test_bench_writes_its_table",
     "test_performance.py::test_fast_paths_agree_for_other_schemes",
     "test_performance.py::test_fast_paths_agree_with_generic_path",

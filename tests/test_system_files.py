@@ -392,3 +392,12 @@ def test_identify_recovers_a_dotted_parameter(tmp_path, capsys):
                "--max-steps", "30", "--out", str(out)])
     assert rc == 0
     assert "contacts.floor.e: initial 0.6 -> recovered 0.8" in capsys.readouterr().out
+
+
+def test_convergence_of_a_system_file(tmp_path, capsys):
+    out = tmp_path / "convergence"
+    rc = main(["convergence", str(BALL), "--h", "2e-2,1e-2", "--ref-h", "5e-3", "--t-end", "0.6", "--out", str(out)])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert "ds h = 0.02" in printed and "ball.x" in printed and "ball.y" in printed  # positions by default
+    assert (out / "study.csv").exists()
