@@ -105,6 +105,8 @@ LONG = {
     "test_double_pendulum.py::test_angles_converge_to_the_reference_before_and_after_the_impact",
     "test_double_pendulum.py::test_joints_hold_and_the_tip_never_penetrates",
     "test_double_pendulum.py::test_energy_never_grows_at_the_impact",
+    "test_readme.py::test_example_runs_as_written[docs/newtons-cradle.md: In Python]",
+    "test_readme.py::test_example_runs_as_written[docs/double-pendulum.md: In Python]",
 }
 
 
