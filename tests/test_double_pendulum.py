@@ -2,6 +2,7 @@
 built as a System): its equations against the minimal-coordinate reference,
 and the DS scheme against the event-driven solution."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 
 import nsga_jax
 from nsga_jax.exact_pendulums import _mass, _rhs, double_pendulum, double_pendulum_energy
-from nsga_jax.scenes import load_scene
+from nsga_jax.scenes import configure, load_scene
 
 KEYS = ("m1", "m2", "l1", "l2", "gravity", "theta1", "theta2", "omega1", "omega2", "wall_x", "e")
 P = dict(m1=1.3, m2=0.7, l1=0.5, l2=0.8, gravity=9.81)
@@ -23,17 +24,28 @@ def coordinates(p, theta):
                       l1 * jnp.sin(th1) + 0.5 * l2 * jnp.sin(th2), -l1 * jnp.cos(th1) - 0.5 * l2 * jnp.cos(th2), th2])
 
 
+def traced_scene(overrides):
+    """The validated parameters and ``make`` of the scene: the model built from
+    traced float parameters inside a jitted function compiles once (an eager
+    build would run its initial-state check operation by operation)."""
+    configured = configure("double_pendulum", overrides)
+    concrete = configured.parameters
+    floats = {k: jnp.asarray(v, float) for k, v in concrete.items()}
+    return concrete, floats, lambda p: configured.spec.make(p, concrete)
+
+
 def test_reference_equations_are_the_systems():
     """At random states: the pins hold at q(θ); the system's mass matrix and
     forces projected on the angles (Jᵀ M J, Jᵀ (f - M J̇ θ̇)) are the
     reference's M(θ) and Lagrange right-hand side; the wall's row of g_q
-    mapped to the angles is ±W; the model's energy is the reference's."""
-    scene = load_scene("double_pendulum", P)
-    model, p = scene.model, scene.parameters
+    mapped to the angles is ±W; the model's energy is the reference's; the
+    initial state is q(θ0), J θ̇0, clear of the wall."""
+    p, floats, make = traced_scene({**P, "omega1": 1.5, "omega2": -2.0})
     args = jnp.array([p["m1"], p["m2"], p["l1"], p["l2"], p["gravity"], p["wall_x"], 1.0])
 
     @jax.jit
-    def both_sides(theta, omega):
+    def both_sides(floats, theta, omega):
+        model, q0, v0, _ = make(floats)
         q = coordinates(p, theta)
         J = jax.jacfwd(lambda th: coordinates(p, th))(theta)
         v = J @ omega
@@ -42,37 +54,43 @@ def test_reference_equations_are_the_systems():
         curvature = jax.jvp(lambda th: jax.jvp(lambda x: coordinates(p, x), (th,), (omega,))[1], (theta,), (omega,))[1]
         acc = jnp.linalg.solve(J.T @ M @ J, J.T @ (model.force(q, v, 0.0) - M @ curvature))
         system = dict(pins=model.bilateral(q), pin_rates=G[:4] @ v, mass=J.T @ M @ J, acc=acc, wall=G[4] @ J,
-                      energy=model.energy(q, v))
+                      energy=model.energy(q, v), side=model.contacts[0].normal[0], q0=q0, v0=v0,
+                      gap0=model.unilateral(q0)[0])
+        theta0, omega0 = jnp.stack([p["theta1"], p["theta2"]]), jnp.stack([p["omega1"], p["omega2"]])
         W = jnp.stack([p["l1"] * jnp.cos(theta[0]), p["l2"] * jnp.cos(theta[1])])
-        reference = dict(mass=_mass(args, *theta), acc=_rhs(0.0, jnp.concatenate([theta, omega]), args)[2:], wall=W)
+        reference = dict(mass=_mass(args, *theta), acc=_rhs(0.0, jnp.concatenate([theta, omega]), args)[2:], wall=W,
+                         q0=coordinates(p, theta0),
+                         v0=jax.jacfwd(lambda th: coordinates(p, th))(theta0) @ omega0)
         return system, reference
 
-    side = float(model.contacts[0].normal[0])
     rng = np.random.default_rng(1)
     for _ in range(3):
         theta, omega = rng.uniform(-2, 2, 2), rng.uniform(-3, 3, 2)
-        system, reference = both_sides(jnp.asarray(theta), jnp.asarray(omega))
+        system, reference = both_sides(floats, jnp.asarray(theta), jnp.asarray(omega))
         np.testing.assert_allclose(system["pins"], 0.0, atol=1e-15)
         np.testing.assert_allclose(system["pin_rates"], 0.0, atol=1e-14)
         np.testing.assert_allclose(system["mass"], reference["mass"], rtol=1e-14)
         np.testing.assert_allclose(system["acc"], reference["acc"], rtol=1e-12)
-        np.testing.assert_allclose(system["wall"], side * reference["wall"], atol=1e-15)
+        np.testing.assert_allclose(system["wall"], system["side"] * reference["wall"], atol=1e-15)
         energy = double_pendulum_energy(*theta, *omega, *(p[k] for k in KEYS[:5]))
         assert float(system["energy"]) == pytest.approx(float(energy), rel=1e-13, abs=1e-13)
+    np.testing.assert_allclose(system["q0"], reference["q0"], atol=1e-15)
+    np.testing.assert_allclose(system["v0"], reference["v0"], atol=1e-14)
+    assert float(system["gap0"]) > 0
 
 
-def test_initial_state_and_checks():
-    scene = load_scene("double_pendulum", {"omega1": 1.5, "omega2": -2.0})
-    p = scene.parameters
-    np.testing.assert_allclose(scene.q0, coordinates(p, jnp.array([p["theta1"], p["theta2"]])), atol=1e-15)
-    J = jax.jacfwd(lambda th: coordinates(p, th))(jnp.array([p["theta1"], p["theta2"]]))
-    np.testing.assert_allclose(scene.v0, J @ jnp.array([1.5, -2.0]), atol=1e-14)
-    assert float(scene.model.unilateral(scene.q0)[0]) > 0
-    assert (scene.model.n_dof, scene.model.n_bilateral, scene.model.n_unilateral) == (6, 4, 1)
+def test_structure_and_checks():
+    p, floats, make = traced_scene({})
+    model = eqx.filter_eval_shape(lambda f: make(f)[0], floats)  # structure only: nothing is evaluated
+    assert (model.n_dof, model.n_bilateral, model.n_unilateral) == (6, 4, 1)
+    assert model.constant_mass and model.linear_force and not model.linear_constraints
+    assert model.joint_names == ("pivot", "elbow") and model.contact_names == ("wall",)
     with pytest.raises(nsga_jax.ConfigError, match="rod 1 .* could reach the wall"):
-        load_scene("double_pendulum", {"wall_x": -0.4})
+        configure("double_pendulum", {"wall_x": -0.4})
     with pytest.raises(nsga_jax.ConfigError, match="starts on the wall"):
-        load_scene("double_pendulum", {"wall_x": -1.0, "theta1": -np.pi / 2, "theta2": -np.pi / 2})
+        configure("double_pendulum", {"wall_x": -1.0, "theta1": -np.pi / 2, "theta2": -np.pi / 2})
+    with pytest.raises(nsga_jax.ConfigError, match="e must be in"):
+        configure("double_pendulum", {"e": 1.5})
 
 
 # ------------------------------------------- the DS scheme against the reference

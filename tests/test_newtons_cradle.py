@@ -1,12 +1,14 @@
 """Newton's cradle: the exact sequence of binary collisions, and the DS scheme
 on the scene against it (exchange of velocities, momentum, energy, positions)."""
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import nsga_jax
 from nsga_jax.exact import newtons_cradle, newtons_cradle_collisions
-from nsga_jax.scenes import load_scene
+from nsga_jax.scenes import configure, load_scene
 
 # ------------------------------------------------------------ exact solution
 
@@ -97,10 +99,14 @@ def test_positions_follow_the_collision_sequence(cradle):
         np.testing.assert_allclose(sol.observables[f"v{i}"][calm], exact[f"v{i}"][calm], atol=1e-8)
 
 
-def test_touching_balls_are_refused_and_counts_checked():
+def test_touching_balls_are_refused_and_the_structure_follows_n_balls():
     with pytest.raises(nsga_jax.ConfigError, match="gap"):
-        load_scene("newtons_cradle", {"gap": 0.0})
+        configure("newtons_cradle", {"gap": 0.0})
     with pytest.raises(nsga_jax.ConfigError, match="n_balls"):
-        load_scene("newtons_cradle", {"n_balls": 1})
-    scene = load_scene("newtons_cradle", {"n_balls": 3})
-    assert scene.model.n_dof == 3 and scene.model.n_unilateral == 2 and scene.model.linear_constraints
+        configure("newtons_cradle", {"n_balls": 1})
+    configured = configure("newtons_cradle", {"n_balls": 3})
+    p = {k: jnp.asarray(v, float) for k, v in configured.parameters.items()}
+    # structure only (nothing evaluated): three balls, two affine contacts with e = 1
+    model = eqx.filter_eval_shape(lambda p: configured.spec.make(p, configured.parameters)[0], p)
+    assert (model.n_dof, model.n_bilateral, model.n_unilateral) == (3, 0, 2) and model.linear_constraints
+    assert model.body_names == ("ball1", "ball2", "ball3") and model.contact_names == ("contact1", "contact2")
