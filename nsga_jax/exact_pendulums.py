@@ -29,6 +29,8 @@ import math
 
 import numpy as np
 
+from . import _custom_types  # noqa: F401  (float64 on from the moment the module loads, as in every numerical module)
+
 
 def _mass(args, th1, th2):
     """M(θ) (2, 2) [kg m²] of the two rods; ``args`` = [m1, m2, l1, l2, g, wall_x, side]."""
@@ -125,7 +127,12 @@ def double_pendulum(t, m1: float, m2: float, l1: float, l2: float, gravity: floa
     while True:
         sol = diffrax.diffeqsolve(term, diffrax.Dopri8(), jnp.asarray(t0), jnp.asarray(t_end), jnp.asarray(1e-3),
                                   y0, args=args, stepsize_controller=controller,
-                                  saveat=diffrax.SaveAt(dense=True, t1=True), event=event, max_steps=100_000)
+                                  saveat=diffrax.SaveAt(dense=True, t1=True), event=event, max_steps=100_000,
+                                  throw=False)
+        if not (bool(sol.result == diffrax.RESULTS.successful) or bool(sol.event_mask)):
+            raise ValueError(f"the reference stops at t = {t0:.6g} s ({sol.result}): after an impact the tip stays "
+                             "on the wall (e = 0, or impacts accumulating), which this reference of isolated "
+                             "impacts does not describe")
         t1 = float(sol.ts[-1])
         start = impacts[-1][0] if impacts else t0
         inside = (t >= start) & (t <= t1)

@@ -114,9 +114,13 @@ def exact(p):
     from ..exact_pendulums import double_pendulum
 
     def solution(ts):
-        (th1, th2, w1, w2), _ = double_pendulum(
-            ts, p["m1"], p["m2"], p["l1"], p["l2"], p["gravity"], p["theta1"], p["theta2"], p["omega1"],
-            p["omega2"], p["wall_x"], p["e"])
+        try:
+            (th1, th2, w1, w2), _ = double_pendulum(
+                ts, p["m1"], p["m2"], p["l1"], p["l2"], p["gravity"], p["theta1"], p["theta2"], p["omega1"],
+                p["omega2"], p["wall_x"], p["e"])
+        except ValueError as err:
+            raise ConfigError(f"double_pendulum: no event-driven reference for this setup: {err}; compare with a "
+                              "run at a smaller step instead (--ref-h)") from None
         tip_x = p["l1"] * np.sin(th1) + p["l2"] * np.sin(th2)
         return {"theta1": th1, "theta2": th2, "omega1": w1, "omega2": w2, "tip_x": tip_x}
 
