@@ -104,6 +104,16 @@ LONG = {
     "test_gradients.py::test_vmap_of_grad_equals_grad",
     "test_gradients.py::test_reverse_equals_forward",
     "test_readme.py::test_example_runs_as_written[docs/python-api.md: Output control: `SaveAt`]",
+    "test_newtons_cradle.py::test_last_ball_leaves_with_the_first_ones_velocity",
+    "test_newtons_cradle.py::test_momentum_exact_and_energy_kept",
+    "test_newtons_cradle.py::test_positions_follow_the_collision_sequence",
+    "test_newtons_cradle.py::test_collisions_inside_steps_shift_the_motion_by_less_than_a_step_each",
+    "test_double_pendulum.py::test_reference_keeps_energy_between_impacts_and_loses_newtons_share",
+    "test_double_pendulum.py::test_angles_converge_to_the_reference_before_and_after_the_impact",
+    "test_double_pendulum.py::test_joints_hold_and_the_tip_never_penetrates",
+    "test_double_pendulum.py::test_energy_never_grows_at_the_impact",
+    "test_readme.py::test_example_runs_as_written[docs/newtons-cradle.md: In Python]",
+    "test_readme.py::test_example_runs_as_written[docs/double-pendulum.md: In Python]",
 }
 
 

@@ -127,6 +127,19 @@ def _own_model_from_python(ns):
     assert float(grad["wall_x"]) == pytest.approx(0.296, rel=1e-2)
 
 
+def _newtons_cradle(ns):
+    sol = ns["sol"]
+    assert sol.stats["failed_steps"] == 0
+    np.testing.assert_allclose(ns["final"], [0.0, 0.0, 1.0], atol=1e-8)
+    np.testing.assert_allclose(sol.observables["momentum"], 0.1, rtol=1e-14)
+
+
+def _double_pendulum(ns):
+    sol = ns["sol"]
+    assert sol.stats["failed_steps"] == 0 and sol.stats["max_penetration"] <= 1e-8
+    assert ns["error"] < 0.05 and set(ns["reference"]) >= {"theta1", "theta2", "omega1", "omega2"}
+
+
 def _system_files(ns):
     sol, scene = ns["sol"], ns["scene"]
     assert sol.stats["failed_steps"] == 0 and scene.parameters["contacts.floor.e"] == 0.8
@@ -138,6 +151,8 @@ def _system_files(ns):
 
 
 CHECKS = {
+    ("docs/newtons-cradle.md", "## In Python"): _newtons_cradle,
+    ("docs/double-pendulum.md", "## In Python"): _double_pendulum,
     ("docs/system-files.md", "## From Python"): _system_files,
     ("docs/own-model.md", "## 4. From Python"): _own_model_from_python,
     ("README.md", "## A first example"): _readme_first_example,

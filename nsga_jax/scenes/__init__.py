@@ -2,9 +2,11 @@
 
 from . import (  # noqa: F401  (registration)
     bouncing_ball,
+    double_pendulum,
     flexible_cube,
     flexible_pendulum,
     impacting_bar,
+    newtons_cradle,
     rigid_box,
     rigid_pendulum,
 )
