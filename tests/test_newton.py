@@ -107,6 +107,8 @@ KINDS = {  # the DS iteration matrices (smooth, position, velocity) each scene's
     "rigid_pendulum": ("Refactored", "Refactored", "ConstantInverse"),
     "flexible_pendulum": ("Refactored",) * 3,  # nonlinear beam of 27 coordinates
     "flexible_cube": ("Held",) * 3,  # nonlinear solid of at least reuse_min_dof coordinates
+    "slider_crank": ("Refactored",) * 3,  # flexible rod: M + h C changes with the beam's tangents
+    "flexible_appendage": ("Refactored",) * 3,
 }
 
 

@@ -10,6 +10,7 @@ import pytest
 
 import nsga_jax as nj
 from nsga_jax.scenes import REGISTRY, load_scene
+from nsga_jax.system import SystemModel
 from nsga_jax.validation import check_model_fields
 
 pytestmark = pytest.mark.usefixtures("no_compilation")  # (tests/conftest.py)
@@ -174,13 +175,17 @@ def test_model_fields_of_every_scene_are_checked():
         scene = load_scene(name)
         model = scene.model
         check_model_fields(model)
-        assert model.ranges, f"{type(model).__name__} declares no ranges"
-        for field, rng in model.ranges.items():
-            bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
-            value = np.full_like(np.asarray(getattr(model, field)), bad)
-            broken = eqx.tree_at(lambda m, f=field: getattr(m, f), model, value)
-            with pytest.raises(nj.ConfigError, match=rf"{type(model).__name__}.{field} must be in"):
-                check_model_fields(broken)
+        # a system's numbers are its parts' fields: each part declares and enforces its ranges
+        parts = [p for p in (*model.bodies, *model.joints, *model.contacts, *model.forces) if p.ranges] \
+            if isinstance(model, SystemModel) else [model]
+        assert parts and all(p.ranges for p in parts), f"{type(model).__name__} declares no ranges"
+        for part in parts:
+            for field, rng in part.ranges.items():
+                bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
+                value = np.full_like(np.asarray(getattr(part, field)), bad)
+                broken = eqx.tree_at(lambda m, f=field: getattr(m, f), part, value)
+                with pytest.raises(nj.ConfigError, match=rf"{type(part).__name__}.{field} must be in"):
+                    check_model_fields(broken)
 
 
 def test_rigid_body_inertia_must_be_positive_definite():
