@@ -127,7 +127,14 @@ def _own_model_from_python(ns):
     assert float(grad["wall_x"]) == pytest.approx(0.296, rel=1e-2)
 
 
+def _mechanisms(ns):
+    scene = ns["scene"]
+    assert scene.parameters["e"] == 1.0
+    assert float(np.abs(np.asarray(scene.model.bilateral(scene.q0))).max()) < 1e-12  # the rigid mechanism's state
+
+
 CHECKS = {
+    ("docs/mechanisms.md", "# Mechanisms: rigid and flexible bodies with joints and stops"): _mechanisms,
     ("docs/own-model.md", "## 4. From Python"): _own_model_from_python,
     ("README.md", "## A first example"): _readme_first_example,
     ("docs/python-api.md", "## Running a model: `integrate` and `simulate`"): _python_api_simulate,
