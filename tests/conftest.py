@@ -54,6 +54,7 @@ LONG = {
     "test_mechanisms.py::test_appendage_tip_stays_admissible_and_the_clamp_holds",
     "test_mechanisms.py::test_appendage_energy_does_not_grow",
     "test_mechanisms.py::test_appendage_starts_as_a_rigid_rotation",
+    "test_mechanisms.py::test_variants_build_consistently",
     "test_performance.py::test_generic_path_keeps_nothing_constant",
     "test_event_gradients.py::test_pendulum_event_gradient_in_wall_position",
     "test_event_gradients.py::test_ball_event_gradient_converges_to_the_exact_derivative",

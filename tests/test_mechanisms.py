@@ -164,3 +164,16 @@ def test_appendage_starts_as_a_rigid_rotation(appendage):
 def test_appendage_refuses_a_tip_above_the_stop(no_compilation):
     with pytest.raises(ConfigError, match="stop"):
         configure("flexible_appendage", {"stop_y": 0.5, "angle": 1.0})
+
+
+def test_variants_build_consistently():
+    """The torque-driven crank and the free hub: the joints hold at the start,
+    and the drive is the configured moment on the crank's angle."""
+    crank = load_scene("slider_crank", {"drive": "torque", "torque": 0.5})
+    model = crank.model
+    f = np.asarray(model.force(jnp.asarray(crank.q0), jnp.zeros_like(jnp.asarray(crank.v0)), 0.0))
+    assert f[model.coordinates("crank")][2] == pytest.approx(0.5)
+    assert not model.has_energy  # a prescribed load has no potential; the scene's energy adds -τ (θ - θ0)
+    free = load_scene("flexible_appendage", {"hub": "free"})
+    assert free.model.joint_names == ("clamp",) and free.model.n_bilateral == 3
+    assert np.abs(np.asarray(free.model.bilateral(jnp.asarray(free.q0)))).max() < 1e-12
