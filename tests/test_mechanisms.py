@@ -1,9 +1,9 @@
 """Mechanisms built from parts: the slider-crank with a flexible rod and a stop,
 and the flexible appendage on a spinning hub.
 
-Runs of one scene's structure share one compiled program (``integrate``
-under ``eqx.filter_jit``, the model and the initial state as arguments), so
-each file compiles each structure once."""
+Runs of one scene's structure and step count share one compiled program
+(``integrate`` under ``eqx.filter_jit``, the model, the scheme, the initial
+state and h as arguments)."""
 
 import math
 
