@@ -150,6 +150,12 @@ def _system_files(ns):
     REGISTRY.pop("drop")  # the page's scene stays out of the other tests' registry
 
 
+def _mechanisms(ns):
+    scene = ns["scene"]
+    assert scene.parameters["e"] == 1.0
+    assert float(np.abs(np.asarray(scene.model.bilateral(scene.q0))).max()) < 1e-12  # the rigid mechanism's state
+
+
 def _systems(ns):
     sol, model = ns["sol"], ns["model"]
     assert sol.stats["failed_steps"] == 0 and sol.stats["max_bilateral_violation_position"] < 1e-8
@@ -162,6 +168,7 @@ CHECKS = {
     ("docs/newtons-cradle.md", "## In Python"): _newtons_cradle,
     ("docs/double-pendulum.md", "## In Python"): _double_pendulum,
     ("docs/system-files.md", "## From Python"): _system_files,
+    ("docs/mechanisms.md", "# Mechanisms: rigid and flexible bodies with joints and stops"): _mechanisms,
     ("docs/own-model.md", "## 4. From Python"): _own_model_from_python,
     ("README.md", "## A first example"): _readme_first_example,
     ("docs/python-api.md", "## Running a model: `integrate` and `simulate`"): _python_api_simulate,
