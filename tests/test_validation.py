@@ -169,24 +169,24 @@ def test_model_fields_are_checked(make, match):
 
 
 def test_model_fields_of_every_scene_are_checked():
-    """Every model's declared ranges hold its scene's defaults, and each is enforced."""
+    """Every model's declared ranges (a system's: its parts') hold its scene's
+    defaults, and each is enforced."""
     from nsga_jax.system import SystemModel
 
     for name in REGISTRY:
         scene = load_scene(name)
         model = scene.model
         check_model_fields(model)
-        # a system's fields are its parts': each part checks its own
-        parts = ([*model.bodies, *model.joints, *model.contacts, *model.forces]
-                 if isinstance(model, SystemModel) else [model])
-        assert any(part.ranges for part in parts), f"{name}: {type(model).__name__} declares no ranges"
-        for part in parts:
-            check_model_fields(part)
-            for field, rng in part.ranges.items():
+        modules = ([*model.bodies, *model.joints, *model.contacts, *model.forces] if isinstance(model, SystemModel)
+                   else [model])
+        assert any(m.ranges for m in modules), f"{name}: no {type(model).__name__} part declares ranges"
+        for module in modules:
+            check_model_fields(module)
+            for field, rng in module.ranges.items():
                 bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
-                value = np.full_like(np.asarray(getattr(part, field)), bad)
-                broken = eqx.tree_at(lambda m, f=field: getattr(m, f), part, value)
-                with pytest.raises(nj.ConfigError, match=rf"{type(part).__name__}.{field} must be in"):
+                value = np.full_like(np.asarray(getattr(module, field)), bad)
+                broken = eqx.tree_at(lambda m, f=field: getattr(m, f), module, value)
+                with pytest.raises(nj.ConfigError, match=rf"{type(module).__name__}.{field} must be in"):
                     check_model_fields(broken)
 
 

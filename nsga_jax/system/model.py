@@ -15,14 +15,18 @@ against the functions, as for any model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.scipy.linalg import block_diag
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
 from ..models.base import Model
-from .base import GROUND, AbstractBody, AbstractConstraint, AbstractContact, AbstractForce, AbstractJoint, Ground
+from . import layout
+from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint
+from .forces import Gravity
+from .groups import call, gather, scatter_block, scatter_vector, shift
 
 
 class SystemModel(Model):
@@ -54,52 +58,33 @@ class SystemModel(Model):
         for body, name in zip(self.bodies, self.body_names):
             if body.dim != self.dim:
                 return f"bodies.{name}: lives in {body.dim} dimensions, the system in {self.dim}"
-        for kind, parts, part_names in self._parts():
+        for kind, parts, part_names in layout.named_parts(self):
             for part, name in zip(parts, part_names):
                 for ref in part.bodies:
                     if ref != GROUND and ref not in self.body_names:
                         known = ", ".join(self.body_names) or "none"
                         return f"{kind}.{name}: names body {ref!r}, which does not exist (bodies: {known}, ground)"
-                message = part.invalid_on(self._bodies_of(part))
+                message = part.invalid_on(layout.bodies_of(self, part))
                 if message:
                     return f"{kind}.{name}: {message}"
         return None
-
-    def _parts(self):
-        return (("joints", self.joints, self.joint_names), ("contacts", self.contacts, self.contact_names),
-                ("forces", self.forces, self.force_names))
-
-    def _slices(self) -> dict[str, slice]:
-        """Each body's slice of the global coordinates (static)."""
-        out, start = {GROUND: slice(0, 0)}, 0
-        for body, name in zip(self.bodies, self.body_names):
-            out[name] = slice(start, start + body.n_dof)
-            start += body.n_dof
-        return out
-
-    def _body(self, name: str) -> AbstractBody:
-        if name == GROUND:
-            return Ground(self.dim)
-        return self.bodies[self.body_names.index(name)]
-
-    def _bodies_of(self, part) -> tuple[AbstractBody, ...]:
-        return tuple(self._body(name) for name in part.bodies)
-
-    def _gather(self, x: Vector, part) -> tuple[Vector, ...]:
-        slices = self._slices()
-        return tuple(x[slices[name]] for name in part.bodies)
 
     @property
     def n_dof(self) -> int:
         return sum(b.n_dof for b in self.bodies)
 
     @property
+    def n_own_bilateral(self) -> int:
+        """Rows of the bodies' own bilateral constraints (the first rows of g^B)."""
+        return sum(b.n_bilateral for b in self.bodies)
+
+    @property
     def n_bilateral(self) -> int:
-        return sum(b.n_bilateral for b in self.bodies) + sum(j.count(self._bodies_of(j)) for j in self.joints)
+        return self.n_own_bilateral + sum(j.count(layout.bodies_of(self, j)) for j in self.joints)
 
     @property
     def n_unilateral(self) -> int:
-        return sum(c.count(self._bodies_of(c)) for c in self.contacts)
+        return sum(c.count(layout.bodies_of(self, c)) for c in self.contacts)
 
     @property
     def constant_mass(self) -> bool:
@@ -107,17 +92,18 @@ class SystemModel(Model):
 
     @property
     def linear_force(self) -> bool:
-        return all(b.linear_force for b in self.bodies) and all(f.is_linear(self._bodies_of(f)) for f in self.forces)
+        return (all(b.linear_force for b in self.bodies)
+                and all(f.is_linear(layout.bodies_of(self, f)) for f in self.forces))
 
     @property
     def velocity_dependent_force(self) -> bool:
         return (any(b.velocity_dependent_force for b in self.bodies)
-                or any(f.velocity_dependent and f.depends_on_state(self._bodies_of(f)) for f in self.forces))
+                or any(f.velocity_dependent and f.depends_on_state(layout.bodies_of(self, f)) for f in self.forces))
 
     @property
     def linear_constraints(self) -> bool:
         own = all(b.n_bilateral == 0 for b in self.bodies)
-        return own and all(c.is_linear(self._bodies_of(c)) for c in (*self.joints, *self.contacts))
+        return own and all(c.is_linear(layout.bodies_of(self, c)) for c in (*self.joints, *self.contacts))
 
     @property
     def bandwidth(self) -> int | None:
@@ -126,7 +112,7 @@ class SystemModel(Model):
         bands = [b.bandwidth for b in self.bodies]
         if not bands or any(b is None for b in bands):
             return None
-        if any(f.depends_on_state(self._bodies_of(f)) for f in self.forces):
+        if any(f.depends_on_state(layout.bodies_of(self, f)) for f in self.forces):
             return None
         return max(b for b in bands if b is not None)
 
@@ -135,126 +121,132 @@ class SystemModel(Model):
         """The total mass of the bodies [kg]."""
         return sum((b.total_mass for b in self.bodies[1:]), self.bodies[0].total_mass)
 
+    # ----------------------------------------------------------- grouping
     # --------------------------------------------------------------- physics
     def initial_state(self) -> tuple[Vector, Vector]:
         """``(q0, v0)``, each (n,), from every body's placement and initial velocity."""
         states = [b.initial_state() for b in self.bodies]
         return jnp.concatenate([s[0] for s in states]), jnp.concatenate([s[1] for s in states])
 
-    def _per_body(self, fn, *xs: Vector) -> list:
-        slices = self._slices()
-        return [fn(b, *(x[slices[name]] for x in xs)) for b, name in zip(self.bodies, self.body_names)]
-
     def mass(self, q: Vector) -> Matrix:
-        return block_diag(*self._per_body(lambda b, qb: b.mass(qb), q))
+        return _body_matrix(self, lambda b, qb: b.mass(qb), q)
 
     def mass_product(self, q: Vector, x: Vector) -> Vector:
-        return jnp.concatenate(self._per_body(lambda b, qb, xb: b.mass_product(qb, xb), q, x))
+        return _body_vector(self, lambda b, qb, xb: b.mass_product(qb, xb), q, x)
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
-        f = jnp.concatenate(self._per_body(lambda b, qb, vb: b.internal_force(qb, vb), q, v))
-        slices = self._slices()
-        for part in self.forces:
-            local = part.generalized(self._bodies_of(part), self._gather(q, part), self._gather(v, part), t)
-            for name, fb in zip(part.bodies, local):
-                f = f.at[slices[name]].add(fb)
+        f = _body_vector(self, lambda b, qb, vb: b.internal_force(qb, vb), q, v)
+        for parts in _force_parts(self):
+            if isinstance(parts, Gravity):
+                f = f + _gravity_vector(self, parts, q.dtype)
+                continue
+            group, stacked, bodies, _ = parts
+
+            def local(part, bodies, qs, vs):
+                return part.generalized(bodies, qs, vs, t)
+
+            values = call(group, local, stacked, bodies, *layout.slot_coordinates(self, group, q, v))
+            for cols, value in zip(group.columns, values):
+                f = scatter_vector(f, cols, value)
         return f
 
     def tangents(self, q: Vector, v: Vector, t: Scalar) -> tuple[Matrix, Matrix]:
-        pairs = self._per_body(lambda b, qb, vb: b.tangents(qb, vb), q, v)
-        K, C = block_diag(*[p[0] for p in pairs]), block_diag(*[p[1] for p in pairs])
-        slices = self._slices()
-        for part in self.forces:
-            bodies = self._bodies_of(part)
-            if not part.depends_on_state(bodies):
+        K = _body_matrix(self, lambda b, qb, vb: b.tangents(qb, vb)[0], q, v)
+        C = _body_matrix(self, lambda b, qb, vb: b.tangents(qb, vb)[1], q, v)
+        for parts in _force_parts(self):
+            if isinstance(parts, Gravity):
                 continue
-            qs, vs = self._gather(q, part), self._gather(v, part)
+            group, stacked, bodies, member = parts
+            if not member.depends_on_state(layout.bodies_of(self, member)):
+                continue
 
-            def local(qs, vs, part=part, bodies=bodies):
+            def local(part, bodies, qs, vs):
                 return part.generalized(bodies, qs, vs, t)
 
-            dq = jax.jacfwd(local, argnums=0)(qs, vs)
-            dv = jax.jacfwd(local, argnums=1)(qs, vs) if part.velocity_dependent else None
-            for i, row in enumerate(part.bodies):
-                for j, col in enumerate(part.bodies):
-                    K = K.at[slices[row], slices[col]].add(-dq[i][j])
+            qs, vs = layout.slot_coordinates(self, group, q, v)
+            dq = call(group, jax.jacfwd(local, argnums=2), stacked, bodies, qs, vs)
+            dv = call(group, jax.jacfwd(local, argnums=3), stacked, bodies, qs, vs) if member.velocity_dependent \
+                else None
+            for i, rows in enumerate(group.columns):
+                for j, cols in enumerate(group.columns):
+                    K = scatter_block(K, rows, cols, -dq[i][j])
                     if dv is not None:
-                        C = C.at[slices[row], slices[col]].add(-dv[i][j])
+                        C = scatter_block(C, rows, cols, -dv[i][j])
         return K, C
 
-    def _constraint_parts(self) -> tuple[AbstractConstraint, ...]:
-        return (*self.joints, *self.contacts)
-
     def bilateral(self, q: Vector) -> ConstraintVector:
-        rows = self._per_body(lambda b, qb: b.bilateral(qb), q)
-        rows += [j.evaluate(self._bodies_of(j), self._gather(q, j)) for j in self.joints]
-        return jnp.concatenate(rows) if rows else jnp.zeros((0,), q.dtype)
+        return _constraint_vector(self, q, "bilateral")
 
     def unilateral(self, q: Vector) -> ConstraintVector:
-        rows = [c.evaluate(self._bodies_of(c), self._gather(q, c)) for c in self.contacts]
-        return jnp.concatenate(rows) if rows else jnp.zeros((0,), q.dtype)
+        return _constraint_vector(self, q, "unilateral")
+
+    def constraints(self, q: Vector) -> ConstraintVector:
+        return _constraint_vector(self, q, "all")
 
     @property
     def restitution(self) -> ConstraintVector:
-        rows = [c.restitution(self._bodies_of(c)) for c in self.contacts]
+        rows = [c.restitution(layout.bodies_of(self, c)) for c in self.contacts]
         return jnp.concatenate(rows) if rows else jnp.zeros((0,))
 
     def constraint_jacobian(self, q: Vector) -> Matrix:
         """g_q (nc, n), assembled from each part's ``jax.jacfwd`` on its own bodies' coordinates."""
-        n, slices = self.n_dof, self._slices()
-        blocks = []
-        for b, name in zip(self.bodies, self.body_names):
-            if b.n_bilateral:
-                local = jax.jacfwd(b.bilateral)(q[slices[name]])
-                blocks.append(jnp.zeros((b.n_bilateral, n), q.dtype).at[:, slices[name]].set(local))
-        for part in self._constraint_parts():
-            bodies = self._bodies_of(part)
-            local = jax.jacfwd(lambda qs, part=part, bodies=bodies: part.evaluate(bodies, qs))(self._gather(q, part))
-            block = jnp.zeros((part.count(bodies), n), q.dtype)
-            for name, column in zip(part.bodies, local):
-                block = block.at[:, slices[name]].add(column)
-            blocks.append(block)
-        return jnp.concatenate(blocks) if blocks else jnp.zeros((0, n), q.dtype)
+        return _jacobian_rows(self, q, bilateral_only=False)
+
+    def bilateral_jacobian(self, q: Vector) -> Matrix:
+        """g_q^B (nb, n), part by part."""
+        return _jacobian_rows(self, q, bilateral_only=True)
 
     def constraint_curvature(self, q: Vector, mu: ConstraintVector) -> Matrix:
-        """d(g_q^T mu)/dq (n, n), summed from each part's own Hessian contracted
-        with its rows of ``mu``: the global ``jacfwd`` of the assembled g_q
-        would materialise an (n, nc, n) tensor."""
-        n, slices = self.n_dof, self._slices()
-        out = jnp.zeros((n, n), q.dtype)
-        if self.linear_constraints or self.n_constraints == 0:
-            return out
-        start = 0
-        for b, name in zip(self.bodies, self.body_names):
-            if b.n_bilateral:
-                rows = mu[start:start + b.n_bilateral]
-                local = jax.jacfwd(lambda x, b=b, rows=rows: jax.jacfwd(b.bilateral)(x).T @ rows)(q[slices[name]])
-                out = out.at[slices[name], slices[name]].add(local)
-                start += b.n_bilateral
-        for part in self._constraint_parts():
-            bodies = self._bodies_of(part)
-            count = part.count(bodies)
-            rows = mu[start:start + count]
-            start += count
+        """d(g_q^T mu)/dq (n, n): each nonlinear part's Hessian of ``mu · g`` on its
+        own bodies' coordinates (affine parts add nothing)."""
+        H = jnp.zeros((self.n_dof, self.n_dof), q.dtype)
+        for group, module, bodies, fn, linear in layout.row_groups(self):
+            if linear:
+                continue
 
-            def pulled(qs, part=part, bodies=bodies, rows=rows):
-                return tuple(J.T @ rows for J in jax.jacfwd(lambda x: part.evaluate(bodies, x))(qs))
+            def weighted(module, bodies, qs, weights, fn=fn):
+                return weights @ fn(module, bodies, qs)
 
-            local = jax.jacfwd(pulled)(self._gather(q, part))
-            for i, row in enumerate(part.bodies):
-                for j, col in enumerate(part.bodies):
-                    out = out.at[slices[row], slices[col]].add(local[i][j])
+            (qs,) = layout.slot_coordinates(self, group, q)
+            local = call(group, jax.hessian(weighted, argnums=2), module, bodies, qs, mu[group.rows])
+            for i, rows in enumerate(group.columns):
+                for j, cols in enumerate(group.columns):
+                    H = scatter_block(H, rows, cols, local[i][j])
+        return H
+
+    def velocity_constraint_gradient(self, q: Vector, v: Vector, bilateral_only: bool = False) -> Matrix:
+        """G^s = d(g_q v)/dq (nc or nb, n) (eq. 50), part by part (affine parts: zero rows)."""
+        rows = self.n_bilateral if bilateral_only else self.n_constraints
+        out = jnp.zeros((rows, self.n_dof), q.dtype)
+        for group, module, bodies, fn, linear in layout.row_groups(self, "bilateral" if bilateral_only else "all"):
+            if linear:
+                continue
+
+            def rate(module, bodies, qs, vs, fn=fn):
+                return jax.jvp(lambda x: fn(module, bodies, x), (qs,), (vs,))[1]
+
+            qs, vs = layout.slot_coordinates(self, group, q, v)
+            blocks = call(group, jax.jacfwd(rate, argnums=2), module, bodies, qs, vs)
+            for cols, block in zip(group.columns, blocks):
+                out = scatter_block(out, group.rows, cols, block)
         return out
 
     # -------------------------------------------------------------- monitors
     def energy(self, q: Vector, v: Vector) -> Scalar:
         """Kinetic + strain energy of the bodies, plus the potential of every
-        conservative force [J]."""
-        kinetic = 0.5 * v @ self.mass_product(q, v)
-        strain = sum(self._per_body(lambda b, qb: b.strain_energy(qb), q), jnp.zeros((), q.dtype))
-        potential = sum((f.potential(self._bodies_of(f), self._gather(q, f)) for f in self.forces),
-                        jnp.zeros((), q.dtype))
-        return kinetic + strain + potential
+        conservative force [J] (gravity's ``-f_g · q``)."""
+        energy = 0.5 * v @ self.mass_product(q, v)
+        for group, stacked in layout.body_groups(self):
+            (cols,) = group.columns
+            energy = energy + jnp.sum(call(group, lambda b, qb: b.strain_energy(qb), stacked, gather(q, cols)))
+        for parts in _force_parts(self):
+            if isinstance(parts, Gravity):
+                energy = energy - _gravity_vector(self, parts, q.dtype) @ q
+                continue
+            group, stacked, bodies, _ = parts
+            (qs,) = layout.slot_coordinates(self, group, q)
+            energy = energy + jnp.sum(call(group, lambda p, bodies, qs: p.potential(bodies, qs), stacked, bodies, qs))
+        return energy
 
     @property
     def has_energy(self) -> bool:
@@ -262,19 +254,22 @@ class SystemModel(Model):
         return all(f.conservative for f in self.forces)
 
     def angular_speed(self, q: Vector, v: Vector) -> float | None:
-        speeds = self._per_body(lambda b, qb, vb: b.angular_speed(qb, vb), q, v)
-        speeds += [j.angular_speed(self._bodies_of(j), self._gather(q, j), self._gather(v, j)) for j in self.joints]
-        speeds = [s for s in speeds if s is not None]
+        slices = layout.body_slices(self)
+        speeds = [s for b, name in zip(self.bodies, self.body_names)
+                  if (s := b.angular_speed(q[slices[name]], v[slices[name]])) is not None]
+        speeds += [s for j in self.joints  # a rod's rate, where a joint makes something turn
+                   if (s := j.angular_speed(layout.bodies_of(self, j), tuple(q[slices[n]] for n in j.bodies),
+                                            tuple(v[slices[n]] for n in j.bodies))) is not None]
         return float(max(speeds)) if speeds else None
 
     # ----------------------------------------------------------------- access
     def body(self, name: str) -> AbstractBody:
         """The body called ``name``."""
-        return self._body(name)
+        return layout.body(self, name)
 
     def coordinates(self, name: str) -> slice:
         """The slice of the global coordinates that holds body ``name``'s."""
-        return self._slices()[name]
+        return layout.body_slices(self)[name]
 
     def rows(self, kind: str, name: str) -> slice:
         """The rows of joint or contact ``name`` (``kind`` ``"joints"`` or
@@ -283,8 +278,72 @@ class SystemModel(Model):
         for group, names, parts in (("joints", self.joint_names, self.joints),
                                     ("contacts", self.contact_names, self.contacts)):
             for part_name, part in zip(names, parts):
-                count = part.count(self._bodies_of(part))
+                count = part.count(layout.bodies_of(self, part))
                 if group == kind and part_name == name:
                     return slice(start, start + count)
                 start += count
         raise KeyError(f"no {kind[:-1]} called {name!r}")
+
+
+def _body_vector(model: SystemModel, fn: Callable, *xs: Vector) -> Vector:
+    """Per-body vectors (k,) from ``fn(body, *local xs)``, assembled (n,)."""
+    if len(model.bodies) == 1:
+        return fn(model.bodies[0], *xs)
+    out = jnp.zeros((model.n_dof,), xs[0].dtype)
+    for group, stacked in layout.body_groups(model):
+        (cols,) = group.columns
+        out = scatter_vector(out, cols, call(group, fn, stacked, *(gather(x, cols) for x in xs)))
+    return out
+
+
+def _body_matrix(model: SystemModel, fn: Callable, *xs: Vector) -> Matrix:
+    """Per-body matrices (k, k) from ``fn(body, *local xs)``, assembled block diagonal (n, n)."""
+    if len(model.bodies) == 1:
+        return fn(model.bodies[0], *xs)
+    out = jnp.zeros((model.n_dof, model.n_dof), xs[0].dtype)
+    for group, stacked in layout.body_groups(model):
+        (cols,) = group.columns
+        out = scatter_block(out, cols, cols, call(group, fn, stacked, *(gather(x, cols) for x in xs)))
+    return out
+
+
+def _force_parts(model: SystemModel) -> list:
+    """Gravity parts alone (evaluated body group by body group), then the
+    other forces in groups of one kind."""
+    gravity = [f for f in model.forces if isinstance(f, Gravity)]
+    others = tuple(f for f in model.forces if not isinstance(f, Gravity))
+    return [*gravity, *layout.part_groups(model, others)]
+
+
+def _constraint_vector(model: SystemModel, q: Vector, which: str) -> ConstraintVector:
+    """The ``which`` constraints (see :meth:`_row_groups`), assembled."""
+    offset = model.n_bilateral if which == "unilateral" else 0
+    size = {"bilateral": model.n_bilateral, "unilateral": model.n_unilateral}.get(which, model.n_constraints)
+    g = jnp.zeros((size,), q.dtype)
+    for group, module, bodies, fn, _ in layout.row_groups(model, which):
+        rows = shift(group.rows, -offset)
+        (qs,) = layout.slot_coordinates(model, group, q)
+        g = g.at[rows].set(call(group, fn, module, bodies, qs))
+    return g
+
+
+def _jacobian_rows(model: SystemModel, q: Vector, bilateral_only: bool) -> Matrix:
+    rows = model.n_bilateral if bilateral_only else model.n_constraints
+    G = jnp.zeros((rows, model.n_dof), q.dtype)
+    for group, module, bodies, fn, _ in layout.row_groups(model, "bilateral" if bilateral_only else "all"):
+        (qs,) = layout.slot_coordinates(model, group, q)
+        blocks = call(group, jax.jacfwd(fn, argnums=2), module, bodies, qs)
+        for cols, block in zip(group.columns, blocks):
+            G = scatter_block(G, group.rows, cols, block)
+    return G
+
+
+def _gravity_vector(model: SystemModel, gravity: Gravity, dtype) -> Vector:
+    """The generalised force (n,) of a gravity part, body group by body group."""
+    f = jnp.zeros((model.n_dof,), dtype)
+    for group, stacked in layout.body_groups(model, gravity.bodies):
+        (cols,) = group.columns
+        f = scatter_vector(f, cols, call(group, lambda b: gravity.on_body(b, dtype), stacked))
+    return f
+
+
