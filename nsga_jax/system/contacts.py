@@ -80,9 +80,9 @@ class PlaneContact(AbstractContact):
         body, q = bodies[0], qs[0]
         n = self.normal / jnp.linalg.norm(self.normal)
         if self.nodes is not None:
-            x = jnp.stack([point(body, q, jnp.zeros((0,)), i) for i in node_indices(body, self.nodes)])
+            x = jnp.stack([point(body, q, jnp.zeros((0,), q.dtype), i) for i in node_indices(body, self.nodes)])
         elif self.points is None:
-            x = point(body, q, jnp.zeros((0,)), None)[None]
+            x = point(body, q, jnp.zeros((0,), q.dtype), None)[None]
         else:
             x = jax.vmap(lambda X: point(body, q, X, None))(self.points)
         return (x - self.origin.astype(q.dtype)) @ n.astype(q.dtype) - self.radius
