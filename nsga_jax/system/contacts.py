@@ -29,6 +29,15 @@ def node_indices(body: AbstractBody, nodes: tuple[int, ...] | str) -> tuple[int,
     return body.node_set(nodes) if isinstance(nodes, str) else nodes  # type: ignore[attr-defined]
 
 
+def node_points(body: AbstractBody, q: Vector, nodes: tuple[int, ...]) -> Vector:
+    """World positions (k, dim) [m] of the body's ``nodes``: in one gather where
+    the body has ``node_positions`` (a solid's face of many nodes), else node by node."""
+    gather = getattr(body, "node_positions", None)
+    if gather is not None:
+        return gather(q, nodes)
+    return jnp.stack([point(body, q, jnp.zeros((0,), q.dtype), i) for i in nodes])
+
+
 class PlaneContact(AbstractContact):
     """Material points of one body against a fixed plane (a line in 2D, a
     point in 1D) through ``origin`` with unit ``normal`` pointing to the
@@ -80,7 +89,7 @@ class PlaneContact(AbstractContact):
         body, q = bodies[0], qs[0]
         n = self.normal / jnp.linalg.norm(self.normal)
         if self.nodes is not None:
-            x = jnp.stack([point(body, q, jnp.zeros((0,), q.dtype), i) for i in node_indices(body, self.nodes)])
+            x = node_points(body, q, node_indices(body, self.nodes))
         elif self.points is None:
             x = point(body, q, jnp.zeros((0,), q.dtype), None)[None]
         else:

@@ -415,3 +415,7 @@ class HexSolid(AbstractBody):
     def position(self, q: Vector, at: Vector, node: int | None) -> Vector:
         i = node_index(node if node is not None else 0, self.n_nodes)
         return q[3 * i:3 * i + 3]
+
+    def node_positions(self, q: Vector, nodes: tuple[int, ...]) -> Matrix:
+        """Positions (k, 3) [m] of the nodes ``nodes`` (static), in one gather."""
+        return q.reshape(-1, 3)[np.asarray(nodes) % self.n_nodes]
