@@ -53,12 +53,13 @@ _LAZY = {
     "load_scene": ".scenes",
     "Tolerances": ".monitors",
     "check_model": ".models.check",
+    "System": ".system",
     "InvariantWarning": "._simulate",
     "AbstractAdjoint": ".adjoint",
     "DiscreteAdjoint": ".adjoint",
     "ImpactTimeAdjoint": ".adjoint",
 }
-_MODULES = ("scenes",)
+_MODULES = ("scenes", "system")
 
 
 def __getattr__(name: str):
@@ -95,6 +96,7 @@ __all__ = [
     "BouncingBall",
     "RigidPendulum",
     "ElasticBar",
+    "System",
     "Result",
     "RESULTS",
     "ConfigError",

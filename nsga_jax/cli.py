@@ -301,12 +301,25 @@ def _sweep(args) -> int:
     return 0
 
 
+def _bench_scene(text: str) -> str:
+    """A ``--scenes`` item: a built-in name, or a scene file (``.py`` or a TOML
+    system file) whose scene is registered and named."""
+    from .scenes.base import REGISTRY, resolve_scene
+
+    if text in REGISTRY or not text.endswith((".py", ".toml")) and ".py:" not in text:
+        return text  # bench names the unknown ones with the built-in scenes
+    name, config = resolve_scene(text)
+    if config is not None:
+        raise ConfigError(f"--scenes takes scene names, .py scene files and system files, not the config {text!r}")
+    return name
+
+
 def _bench(args) -> int:
     from .bench import bench, markdown
     from .folders import writable_folder
     from .validation import real
 
-    scenes = None if args.scenes is None else args.scenes.split(",")
+    scenes = None if args.scenes is None else [_bench_scene(s.strip()) for s in args.scenes.split(",")]
     try:
         batches = [int(b) for b in args.batch.split(",")]
     except ValueError:

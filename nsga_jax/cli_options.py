@@ -35,14 +35,15 @@ def command_parser() -> argparse.ArgumentParser:
     parents = cast(list[OneLineErrorParser], [cached])
 
     run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=parents)
-    run.add_argument("scene", help="scene name (see `nsga-jax scenes`), a .toml config, or a .py file that registers "
-                                   "a scene (file.py:NAME picks one of several)")
+    run.add_argument("scene", help="scene name (see `nsga-jax scenes`), a .toml config or system file, or a .py "
+                                   "file that registers a scene (file.py:NAME picks one of several)")
     run.add_argument("--h", type=float, help="step size [s]")
     run.add_argument("--t-end", type=float, help="end time [s]")
     run.add_argument("--rho-inf", type=float, help="spectral radius at infinity, in [0, 1]")
     run.add_argument("--scheme", choices=SCHEME_NAMES, help="time integration scheme")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                     help="override a config key (repeatable), e.g. --set e=0.5")
+                     help="override a config key (repeatable), e.g. --set e=0.5 or, for a system file, "
+                          "--set bodies.ball.mass=2")
     run.add_argument("--dtype", choices=("float64", "float32"), help="floating-point precision (default float64)")
     run.add_argument("--record-every", type=int, metavar="K",
                      help="keep every K-th step in memory and in trajectory.npz; every step still goes to "
@@ -60,7 +61,7 @@ def command_parser() -> argparse.ArgumentParser:
 
     conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size",
                           parents=parents)
-    conv.add_argument("scene", help="scene name or .toml config")
+    conv.add_argument("scene", help="scene name, .toml config or system file")
     conv.add_argument("--scheme", default="ds", help="comma-separated schemes (ds, dsn, cs, mj)")
     conv.add_argument("--h", required=True, help="comma-separated step sizes [s]")
     ref = conv.add_mutually_exclusive_group(required=True)
@@ -77,7 +78,7 @@ def command_parser() -> argparse.ArgumentParser:
 
     ident = sub.add_parser("identify", help="fit scene parameters to measured (or synthetic) motion by "
                                             "gradient descent through the simulation", parents=parents)
-    ident.add_argument("scene", help="scene name or .toml config")
+    ident.add_argument("scene", help="scene name, .toml config or system file")
     ident.add_argument("--params", required=True, help="comma-separated float parameters to identify, e.g. E,e")
     source = ident.add_mutually_exclusive_group(required=True)
     source.add_argument("--data", type=Path, help="measured data: .csv (header t,OBS,...) or .npz (t, OBS...)")
@@ -105,7 +106,7 @@ def command_parser() -> argparse.ArgumentParser:
 
     sw = sub.add_parser("sweep", help="run a scene for every combination of parameter values and step sizes "
                                       "(batched, split over every device, resumable)", parents=parents)
-    sw.add_argument("scene", help="scene name or .toml config")
+    sw.add_argument("scene", help="scene name, .toml config or system file")
     sw.add_argument("--grid", required=True,
                     help="swept float parameters, e.g. 'e=0:1:11,E=800:1000:5' (start:stop:count) or 'e=0.2;0.5'")
     sw.add_argument("--h", help="comma-separated step sizes [s] (default: the scene's)")
@@ -124,7 +125,8 @@ def command_parser() -> argparse.ArgumentParser:
     hosts.add_argument("--process-id", type=int, metavar="I", help="this process's index, in [0, N)")
 
     bn = sub.add_parser("bench", help="time per step, batched throughput, compile time, float32 vs float64")
-    bn.add_argument("--scenes", help="comma-separated scenes (default: all)")
+    bn.add_argument("--scenes", help="comma-separated scenes: names, .py scene files or system files "
+                                          "(default: all built-in)")
     bn.add_argument("--batch", default="1,64,1024", help="comma-separated batch sizes (default 1,64,1024)")
     bn.add_argument("--dtype", default="float64,float32", help="comma-separated precisions")
     bn.add_argument("--scheme", choices=SCHEME_NAMES, default="ds")

@@ -16,7 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
-WRITTEN_ELSEWHERE = {"docs/own-model.md", "docs/reliability.md"}
+WRITTEN_ELSEWHERE = {"docs/own-model.md", "docs/reliability.md", "docs/systems.md"}
 """Pages the documentation links to that are written separately; a link to one
 is accepted while it does not exist yet (and checked once it does)."""
 
@@ -127,7 +127,18 @@ def _own_model_from_python(ns):
     assert float(grad["wall_x"]) == pytest.approx(0.296, rel=1e-2)
 
 
+def _system_files(ns):
+    sol, scene = ns["sol"], ns["scene"]
+    assert sol.stats["failed_steps"] == 0 and scene.parameters["contacts.floor.e"] == 0.8
+    assert float(sol.observables["floor.gap"].min()) > -1e-10  # it bounced, and never sank in
+    assert abs(float(ns["grad"]) - 0.6) < 1e-9
+    from nsga_jax.scenes import REGISTRY
+
+    REGISTRY.pop("drop")  # the page's scene stays out of the other tests' registry
+
+
 CHECKS = {
+    ("docs/system-files.md", "## From Python"): _system_files,
     ("docs/own-model.md", "## 4. From Python"): _own_model_from_python,
     ("README.md", "## A first example"): _readme_first_example,
     ("docs/python-api.md", "## Running a model: `integrate` and `simulate`"): _python_api_simulate,

@@ -253,7 +253,7 @@ class VaryingJacobian(AbstractConstraintJacobian):
         return model.constraint_jacobian(q)
 
     def bilateral(self, model: Model, q: Vector) -> jax.Array:
-        return jax.jacfwd(model.bilateral)(q)
+        return model.bilateral_jacobian(q)
 
 
 class ConstantJacobian(AbstractConstraintJacobian):
@@ -276,19 +276,14 @@ class ConstantJacobian(AbstractConstraintJacobian):
 
 
 def curvature(model: Model, q: Vector, mu: jax.Array) -> Matrix:
-    """d(g_q(q)^T mu)/dq at fixed mu (mu over all nc constraints); zero if affine."""
-    if model.linear_constraints or model.n_constraints == 0:
-        return jnp.zeros((model.n_dof, model.n_dof), q.dtype)
-    return jax.jacfwd(lambda x: model.constraint_jacobian(x).T @ mu)(q)
+    """d(g_q(q)^T mu)/dq at fixed mu (mu over all nc constraints); zero if affine
+    (:meth:`~nsga_jax.models.Model.constraint_curvature`)."""
+    return model.constraint_curvature(q, mu)
 
 
 def convective(model: Model, q: Vector, v: Vector, bilateral_only: bool = False) -> jax.Array:
     """G^s = d(g_q(q) v)/dq at fixed v, shape (nb or nc, n); zero if affine (eq. 50)."""
-    rows = model.n_bilateral if bilateral_only else model.n_constraints
-    if model.linear_constraints:
-        return jnp.zeros((rows, model.n_dof), q.dtype)
-    fn = model.bilateral if bilateral_only else model.constraints
-    return jax.jacfwd(lambda x: jax.jacfwd(fn)(x) @ v)(q)
+    return model.velocity_constraint_gradient(q, v, bilateral_only)
 
 
 def pad_bilateral(model: Model, lam: jax.Array) -> jax.Array:

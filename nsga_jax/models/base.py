@@ -198,17 +198,25 @@ class Model(eqx.Module):
         """g_q = d[g^B; g^U]/dq, shape (nc, n)."""
         return jax.jacfwd(self.constraints)(q)
 
+    def bilateral_jacobian(self, q: Vector) -> ConstraintMatrix:
+        """g_q^B = d g^B/dq, shape (nb, n)."""
+        return jax.jacfwd(self.bilateral)(q)
+
     def constraint_curvature(self, q: Vector, mu: ConstraintVector) -> Matrix:
-        """d(g_q(q)^T mu)/dq at fixed mu, shape (n, n); zero for affine constraints."""
+        """d(g_q(q)^T mu)/dq at fixed mu (mu over all nc constraints), shape (n, n);
+        zero for affine constraints."""
         if self.linear_constraints or self.n_constraints == 0:
             return jnp.zeros((self.n_dof, self.n_dof), dtype=q.dtype)
         return jax.jacfwd(lambda x: self.constraint_jacobian(x).T @ mu)(q)
 
-    def velocity_constraint_gradient(self, q: Vector, v: Vector) -> ConstraintMatrix:
-        """G^s = d(g_q(q) v)/dq at fixed v, shape (nc, n) (paper eq. 50)."""
-        if self.linear_constraints or self.n_constraints == 0:
-            return jnp.zeros((self.n_constraints, self.n_dof), dtype=q.dtype)
-        return jax.jacfwd(lambda x: self.constraint_jacobian(x) @ v)(q)
+    def velocity_constraint_gradient(self, q: Vector, v: Vector, bilateral_only: bool = False) -> ConstraintMatrix:
+        """G^s = d(g_q(q) v)/dq at fixed v, shape (nc, n), or (nb, n) with
+        ``bilateral_only`` (paper eq. 50); zero for affine constraints."""
+        rows = self.n_bilateral if bilateral_only else self.n_constraints
+        if self.linear_constraints:
+            return jnp.zeros((rows, self.n_dof), dtype=q.dtype)
+        fn = self.bilateral if bilateral_only else self.constraints
+        return jax.jacfwd(lambda x: jax.jacfwd(fn)(x) @ v)(q)
 
     def inertia_stiffness(self, q: Vector, a: Vector) -> Matrix:
         """d(M(q) a)/dq at fixed a, shape (n, n); zero for a constant mass."""

@@ -192,7 +192,8 @@ def _read_config(path: Path) -> dict[str, Any]:
     if unknown:
         raise ConfigError(f"{path}: unknown top-level key {unknown[0]!r}; allowed: scene, parameters, solver")
     if "scene" not in data:
-        raise ConfigError(f"{path}: missing key 'scene' (one of {', '.join(sorted(REGISTRY))}, or a scene file)")
+        raise ConfigError(f"{path}: missing key 'scene' (one of {', '.join(sorted(REGISTRY))}, or a scene file); "
+                          "a system file has [bodies.NAME] tables")
     if not isinstance(data["scene"], str):
         raise ConfigError(f"{path}: 'scene' must be a string (a scene name or a .py scene file), "
                           f"got {type(data['scene']).__name__} {data['scene']!r}")
@@ -233,8 +234,9 @@ def load_scene_file(path: str | Path) -> tuple[str, ...]:
 
 def resolve_scene(name_or_path: str | Path, relative_to: Path | None = None) -> tuple[str, Path | None]:
     """``(scene name, config path or None)`` for a built-in name, a ``.toml``
-    config, a ``.py`` scene file, or ``file.py:name`` (one of several scenes
-    a file registers). A built-in name is a name even where a file or folder
+    config, a ``.toml`` system file (:mod:`nsga_jax.scenes.system_file`,
+    registered under its name), a ``.py`` scene file, or ``file.py:name``
+    (one of several scenes a file registers). A built-in name is a name even where a file or folder
     of that name exists."""
     text = str(name_or_path)
     if text in REGISTRY and not text.endswith(SCENE_FILE_SUFFIXES):
@@ -254,7 +256,14 @@ def resolve_scene(name_or_path: str | Path, relative_to: Path | None = None) -> 
                               f"choose one as {path}:NAME")
         return names[0], None
     if text.endswith(".toml"):
-        return "", Path(text)
+        from .system_file import is_system_file, load_system_file
+
+        path = Path(text)
+        if relative_to is not None and not path.is_absolute():
+            path = relative_to / path
+        if is_system_file(path):
+            return load_system_file(path), None
+        return "", path
     hint = " (a file or folder of that name exists, but only .toml configs and .py scene files are read)" \
         if Path(text).exists() else ""
     raise ConfigError(f"unknown scene {text!r}{hint}; built-in scenes: {', '.join(sorted(REGISTRY))}; "
@@ -288,13 +297,21 @@ def configure(name_or_path: str | Path, overrides: dict[str, Any] | None = None)
     solver_in: dict[str, Any] = {}
     name, path = resolve_scene(name_or_path)
     if path is not None:
+        from .system_file import flatten  # dotted [parameters] keys of a system file's config
+
         data = _read_config(path)
-        name, _ = resolve_scene(data["scene"], relative_to=path.parent)
-        params_in.update(data.get("parameters", {}))
+        name, inner = resolve_scene(data["scene"], relative_to=path.parent)
+        if inner is not None:
+            raise ConfigError(f"{path}: scene = {data['scene']!r} is a config, not a scene; name a scene, a .py "
+                              "scene file or a system file")
+        params_in.update(flatten(data.get("parameters", {})))
         solver_in.update(data.get("solver", {}))
     spec = REGISTRY[name]
     solver_specs = spec.solver_specs()
-    for key, value in (overrides or {}).items():
+    from .system_file import expand_components
+
+    params_in = expand_components(params_in, spec.parameters)
+    for key, value in expand_components(overrides or {}, spec.parameters).items():
         if key in spec.parameters:
             params_in[key] = value
         elif key in solver_specs:

@@ -149,7 +149,9 @@ class RigidBody2D(AbstractBody):
         return jnp.concatenate([self.mass_ * g, jnp.zeros((1,), g.dtype)])
 
     def position(self, q: Vector, at: Vector, node: int | None) -> Vector:
-        return q[:2] + rotation_2d(q[2]) @ at.astype(q.dtype)
+        c, s = jnp.cos(q[2]), jnp.sin(q[2])
+        X = at.astype(q.dtype)
+        return q[:2] + jnp.stack([c * X[0] - s * X[1], s * X[0] + c * X[1]])
 
     def angle(self, q: Vector, node: int | None) -> Scalar:
         return q[2]

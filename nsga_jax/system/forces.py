@@ -11,7 +11,7 @@ import numpy as np
 from .._custom_types import Scalar, Vector
 from .._util import as_float
 from ..validation import Range
-from .base import AbstractForce, anchor, point, point_force
+from .base import AbstractBody, AbstractForce, anchor, point, point_force
 
 
 class Gravity(AbstractForce):
@@ -30,6 +30,10 @@ class Gravity(AbstractForce):
 
     def generalized(self, bodies, qs, vs, t):
         return tuple(b.gravity_force(self.acceleration.astype(q.dtype)) for b, q in zip(bodies, qs))
+
+    def on_body(self, body: AbstractBody, dtype) -> Vector:
+        """The generalised force (k,) [N] on one body."""
+        return body.gravity_force(self.acceleration.astype(dtype))
 
     def potential(self, bodies, qs):
         return -sum((b.gravity_force(self.acceleration.astype(q.dtype)) @ q for b, q in zip(bodies, qs)),
