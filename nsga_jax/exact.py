@@ -123,3 +123,63 @@ def rigid_pendulum(t, length: float, gravity: float, angle: float, omega: float,
     x, y = length * np.sin(phi), -length * np.cos(phi)
     vx, vy = length * np.cos(phi) * dphi, length * np.sin(phi) * dphi
     return (x, y, vx, vy), np.asarray(impacts)
+
+
+def newtons_cradle_collisions(x0, v0, mass, radius: float, e: float, t_max: float, max_collisions: int = 10_000):
+    """The sequence of binary collisions of balls on a frictionless line.
+
+    Between collisions every ball flies at constant velocity; two neighbours
+    collide when their gap ``x_{i+1} - x_i - 2 radius`` closes, and Newton's
+    law on their relative velocity with momentum conservation gives
+
+        v_i⁺     = v_i⁻     - m_{i+1} (1 + e) (v_i⁻ - v_{i+1}⁻) / (m_i + m_{i+1}),
+        v_{i+1}⁺ = v_{i+1}⁻ + m_i     (1 + e) (v_i⁻ - v_{i+1}⁻) / (m_i + m_{i+1}).
+
+    With every gap > 0 no two collisions are simultaneous (for equal masses
+    and e = 1 the velocities are exchanged, and the last ball leaves with the
+    first one's velocity).
+
+    Args:
+        x0: initial centres (N,) [m], increasing; v0: initial velocities (N,) [m/s];
+        mass: each ball's mass [kg], scalar or (N,); radius [m]; e: restitution
+            in [0, 1]; t_max: last time of interest [s].
+
+    Returns:
+        (times, states): the collision instants (K,) [s] in order, and the
+        state after each as ``(x, v)`` arrays of shape (K + 1, N) — row 0 the
+        initial state, row k the centres at collision k and the velocities
+        just after it.
+    """
+    x = np.array(x0, dtype=float)
+    v = np.array(v0, dtype=float)
+    m = np.broadcast_to(np.asarray(mass, dtype=float), x.shape)
+    t, times, xs, vs = 0.0, [], [x.copy()], [v.copy()]
+    for _ in range(max_collisions):
+        closing = v[:-1] - v[1:]
+        gaps = np.maximum(x[1:] - x[:-1] - 2.0 * radius, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dt = np.where(closing > 0.0, gaps / closing, np.inf)
+        i = int(np.argmin(dt))
+        if not np.isfinite(dt[i]) or t + dt[i] > t_max:
+            break
+        t += float(dt[i])
+        x = x + dt[i] * v
+        x[i + 1] = x[i] + 2.0 * radius  # exactly in contact (no round-off overlap)
+        p = (1.0 + e) * closing[i] / (m[i] + m[i + 1])
+        v[i], v[i + 1] = v[i] - m[i + 1] * p, v[i + 1] + m[i] * p
+        times.append(t)
+        xs.append(x.copy())
+        vs.append(v.copy())
+    return np.asarray(times), (np.asarray(xs), np.asarray(vs))
+
+
+def newtons_cradle(t, x0, v0, mass, radius: float, e: float):
+    """Exact centres x(t) [m] and velocities v(t) [m/s] (right limits) of the
+    balls of :func:`newtons_cradle_collisions`, each of shape (len(t), N)."""
+    t = np.asarray(t, dtype=float)
+    times, (xs, vs) = newtons_cradle_collisions(x0, v0, mass, radius, e, float(t.max(initial=0.0)))
+    starts = np.concatenate([[0.0], times])
+    k = np.searchsorted(starts, t, side="right") - 1
+    k = np.maximum(k, 0)
+    s = (t - starts[k])[:, None]
+    return xs[k] + s * vs[k], vs[k]

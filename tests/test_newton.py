@@ -107,6 +107,10 @@ KINDS = {  # the DS iteration matrices (smooth, position, velocity) each scene's
     "rigid_pendulum": ("Refactored", "Refactored", "ConstantInverse"),
     "flexible_pendulum": ("Refactored",) * 3,  # nonlinear beam of 27 coordinates
     "flexible_cube": ("Held",) * 3,  # nonlinear solid of at least reuse_min_dof coordinates
+    "newtons_cradle": ("ConstantInverse",) * 3,  # point masses on a line, affine contacts
+    "double_pendulum": ("Refactored", "Refactored", "ConstantInverse"),  # pins on rotating rods
+    "slider_crank": ("Refactored",) * 3,  # flexible rod: M + h C changes with the beam's tangents
+    "flexible_appendage": ("Refactored",) * 3,
 }
 
 

@@ -115,7 +115,7 @@ def reference(ts, p, side):
 
 def test_scene_file_registers_and_refuses_bad_setups():
     s = scene()
-    assert s.name == "double_pendulum" and type(s.model).__name__ == "DoublePendulum"
+    assert s.name == "double_pendulum_masses" and type(s.model).__name__ == "DoublePendulum"
     assert s.spec.observables[0] == "x2" and s.spec.error_observables == ("x2", "vx2")
     # q0 on both rods, v0 along them (the initial state is consistent)
     assert np.abs(s.model.bilateral(s.q0)).max() < 1e-15
@@ -123,9 +123,9 @@ def test_scene_file_registers_and_refuses_bad_setups():
     assert np.abs(G[:2] @ s.v0).max() < 1e-14
     assert float(s.model.unilateral(s.q0)[0]) > 0
     # the same scene by name in the file, and from the TOML config beside it
-    assert load_scene(f"{ROOT / EXAMPLE}:double_pendulum").name == "double_pendulum"
+    assert load_scene(f"{ROOT / EXAMPLE}:double_pendulum_masses").name == "double_pendulum_masses"
     config = load_scene(ROOT / "docs/examples/double_pendulum.toml")
-    assert config.name == "double_pendulum" and config.parameters["e"] == 0.5 and config.solver["h"] == 5e-4
+    assert config.name == "double_pendulum_masses" and config.parameters["e"] == 0.5 and config.solver["h"] == 5e-4
     with pytest.raises(nsga_jax.ConfigError, match="wall_x"):
         scene({"wall_x": -0.3})  # the upper mass could reach it
     with pytest.raises(nsga_jax.ConfigError, match="theta1, theta2: the lower mass starts beyond the wall"):
@@ -290,7 +290,7 @@ def test_cli_run(cli):
     for name in ("trajectory.npz", "summary.json", "observables.png", "iterations.png"):
         assert (out / name).stat().st_size > 1000, name
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["scene"] == "double_pendulum" and summary["n_steps"] == 500
+    assert summary["scene"] == "double_pendulum_masses" and summary["n_steps"] == 500
     assert summary["failed_steps"] == 0 and summary["max_penetration"] < 1e-8
     assert summary["max_bilateral_violation_position"] < 1e-8
     data = np.load(out / "trajectory.npz")

@@ -201,9 +201,9 @@ def chain(n_links: int, length: float = 0.3) -> System:
     s = System(dim=2, gravity=[0.0, -9.81])
     for i in range(n_links):
         s.add_body(f"l{i}", RigidBody2D(1.0 + 0.1 * i, 0.01, [(i + 0.5) * length, 0.0]))
-        s.add_joint(f"p{i}", Pin("ground" if i == 0 else f"l{i - 1}", f"l{i}", at_a=[0.0 if i == 0 else length / 2, 0.0],
-                                 at_b=[-length / 2, 0.0]))
-        s.add_force(f"k{i}", TorsionalSpring("ground" if i == 0 else f"l{i - 1}", f"l{i}", 2.0 + i, damping=0.1))
+        parent = "ground" if i == 0 else f"l{i - 1}"
+        s.add_joint(f"p{i}", Pin(parent, f"l{i}", at_a=[0.0 if i == 0 else length / 2, 0.0], at_b=[-length / 2, 0.0]))
+        s.add_force(f"k{i}", TorsionalSpring(parent, f"l{i}", 2.0 + i, damping=0.1))
     s.add_contact("wall", PlaneContact(f"l{n_links - 1}", normal=[1.0, 0.0], origin=[-1.0, 0.0], e=0.5,
                                        points=[[length / 2, 0.0], [-length / 2, 0.0]]))
     return s

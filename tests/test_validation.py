@@ -169,18 +169,25 @@ def test_model_fields_are_checked(make, match):
 
 
 def test_model_fields_of_every_scene_are_checked():
-    """Every model's declared ranges hold its scene's defaults, and each is enforced."""
+    """Every model's declared ranges (a system's: its parts') hold its scene's
+    defaults, and each is enforced."""
+    from nsga_jax.system import SystemModel
+
     for name in REGISTRY:
         scene = load_scene(name)
         model = scene.model
         check_model_fields(model)
-        assert model.ranges, f"{type(model).__name__} declares no ranges"
-        for field, rng in model.ranges.items():
-            bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
-            value = np.full_like(np.asarray(getattr(model, field)), bad)
-            broken = eqx.tree_at(lambda m, f=field: getattr(m, f), model, value)
-            with pytest.raises(nj.ConfigError, match=rf"{type(model).__name__}.{field} must be in"):
-                check_model_fields(broken)
+        modules = ([*model.bodies, *model.joints, *model.contacts, *model.forces] if isinstance(model, SystemModel)
+                   else [model])
+        assert any(m.ranges for m in modules), f"{name}: no {type(model).__name__} part declares ranges"
+        for module in modules:
+            check_model_fields(module)
+            for field, rng in module.ranges.items():
+                bad = rng.lo - 1.0 if rng.lo > -math.inf else rng.hi + 1.0
+                value = np.full_like(np.asarray(getattr(module, field)), bad)
+                broken = eqx.tree_at(lambda m, f=field: getattr(m, f), module, value)
+                with pytest.raises(nj.ConfigError, match=rf"{type(module).__name__}.{field} must be in"):
+                    check_model_fields(broken)
 
 
 def test_rigid_body_inertia_must_be_positive_definite():

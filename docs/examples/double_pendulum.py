@@ -243,7 +243,7 @@ def make(p, concrete):
 
 SPEC = register(
     SceneSpec(
-        name="double_pendulum",
+        name="double_pendulum_masses",
         description="Double pendulum (two point masses, two rigid rods) whose lower mass strikes a wall",
         parameters=PARAMETERS,
         solver_defaults={"h": 1e-3, "t_end": 2.0},

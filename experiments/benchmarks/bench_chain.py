@@ -23,7 +23,7 @@ from pathlib import Path
 
 def chain(n_links: int, length: float = 0.2, mass: float = 0.5):
     """``(model, q0, v0)`` of the chain: link i's centre at ((i + 1/2) L, 0)."""
-    from nsga_jax.system import PlaneContact, Pin, RigidBody2D, System
+    from nsga_jax.system import Pin, PlaneContact, RigidBody2D, System
 
     system = System(dim=2, gravity=[0.0, -9.81])
     for i in range(n_links):

@@ -2,11 +2,15 @@
 
 from . import (  # noqa: F401  (registration)
     bouncing_ball,
+    double_pendulum,
+    flexible_appendage,
     flexible_cube,
     flexible_pendulum,
     impacting_bar,
+    newtons_cradle,
     rigid_box,
     rigid_pendulum,
+    slider_crank,
 )
 from .base import REGISTRY, Scene, SceneSpec, configure, load_scene, parametrize, parse_override, register
 from .params import SOLVER_PARAMS, Param

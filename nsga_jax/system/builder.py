@@ -105,42 +105,50 @@ class System:
         return model, q0, v0
 
 
+def _residuals(model: SystemModel, q0: Vector, v0: Vector) -> tuple[Vector, Vector]:
+    """``(g(q0), g_q(q0) v0)``: every constraint at the initial state, and its rate."""
+    return model.constraints(q0), model.constraint_jacobian(q0) @ v0
+
+
+_compiled_residuals: Any = None
+
+
 def check_initial_state(model: SystemModel, q0: Vector, v0: Vector, *, tolerance: float = 1e-9) -> None:
     """Refuse, by name, an initial state that violates a joint (position or
-    velocity level, beyond ``tolerance`` times the system's size) or
-    penetrates a contact. Skipped where the state is traced."""
+    velocity level, beyond ``tolerance`` times the state's size) or
+    penetrates a contact. The constraints are evaluated by one compiled
+    program (compiled once per system structure, so that a sweep's members
+    are checked cheaply). Skipped where the state is traced."""
+    global _compiled_residuals
+    import equinox as eqx
     import jax
     import jax.numpy as jnp
 
     if any(isinstance(x, jax.core.Tracer) for x in (q0, v0, *jax.tree_util.tree_leaves(model))):
         return
+    if _compiled_residuals is None:
+        _compiled_residuals = eqx.filter_jit(_residuals)
     q0, v0 = jnp.asarray(q0, float), jnp.asarray(v0, float)
-    scale = max(1.0, float(jnp.abs(q0).max(initial=0.0)))
-    own = sum(b.n_bilateral for b in model.bodies)
-    g = np.asarray(model.constraints(q0))
-    w = np.asarray(model.constraint_jacobian(q0) @ v0)
-    if own and np.abs(g[:own]).max() > tolerance * scale:
-        worst = model.body_names[0]
-        start = 0
-        for b, name in zip(model.bodies, model.body_names):
-            if b.n_bilateral and np.abs(g[start:start + b.n_bilateral]).max() > tolerance * scale:
-                worst = name
-                break
-            start += b.n_bilateral
-        raise ConfigError(f"bodies.{worst}: the initial orientation is not a rotation (natural coordinates "
-                          f"violate rigidity by {np.abs(g[:own]).max():.3g} m)")
+    g, w = (np.asarray(x) for x in _compiled_residuals(model, q0, v0))
+    scale = max(1.0, float(np.abs(np.asarray(q0)).max(initial=0.0)))
+    vscale = max(1.0, float(np.abs(np.asarray(v0)).max(initial=0.0)))
+    start = 0
+    for b, name in zip(model.bodies, model.body_names):
+        own = g[start:start + b.n_bilateral]
+        if own.size and np.abs(own).max() > tolerance * scale:
+            raise ConfigError(f"bodies.{name}: the initial orientation is not a rotation (its natural coordinates "
+                              f"violate rigidity by {np.abs(own).max():.3g} m)")
+        start += b.n_bilateral
     for name in model.joint_names:
         rows = model.rows("joints", name)
         if np.abs(g[rows]).max(initial=0.0) > tolerance * scale:
             raise ConfigError(f"joints.{name}: violated at the initial state by {np.abs(g[rows]).max():.3g} m "
                               f"(g = {np.round(g[rows], 12).tolist()}); place the bodies so that it holds")
-        vscale = max(1.0, float(np.abs(np.asarray(v0)).max(initial=0.0)))
         if np.abs(w[rows]).max(initial=0.0) > tolerance * vscale:
             raise ConfigError(f"joints.{name}: the initial velocities violate it by {np.abs(w[rows]).max():.3g} m/s "
                               "(their relative motion is not one the joint allows)")
     for name in model.contact_names:
-        rows = model.rows("contacts", name)
-        gaps = g[rows]
+        gaps = g[model.rows("contacts", name)]
         if gaps.size and gaps.min() < -tolerance * scale:
             i = int(np.argmin(gaps))
             raise ConfigError(f"contacts.{name}: initial penetration of {-gaps[i]:.3g} m at point {i} "

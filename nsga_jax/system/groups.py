@@ -18,6 +18,7 @@ hand-written model of it.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any, NamedTuple
 
@@ -30,15 +31,28 @@ from .._custom_types import Vector
 
 def kind_of(module: Any) -> Hashable:
     """What must be equal for two modules to share a ``vmap``: the class, the
-    static structure (the tree definition holds the static fields) and the
-    shape and dtype of every leaf."""
-    leaves, treedef = jax.tree_util.tree_flatten(module)
-    return (type(module), treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves))
+    static fields (but the names of the bodies a part acts on, which only
+    say where its coordinates are gathered from) and the shape and dtype of
+    every leaf."""
+    leaves = jax.tree_util.tree_leaves(module)
+    names = set(getattr(module, "bodies", ()))  # a part's; a body has none
+    static = tuple((f.name, value) for f in dataclasses.fields(module) if f.metadata.get("static")
+                   and not _names_bodies(value := getattr(module, f.name), names))
+    return (type(module), static, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves))
+
+
+def _names_bodies(value: Any, names: set[str]) -> bool:
+    if isinstance(value, str):
+        return value in names
+    return isinstance(value, tuple) and len(value) > 0 and all(isinstance(v, str) and v in names for v in value)
 
 
 def stack(modules: Sequence[Any]) -> Any:
-    """Modules of one kind as one module with a leading axis on every leaf."""
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *modules)
+    """Modules of one kind as one module with a leading axis on every leaf
+    (the first member's static fields stand for all)."""
+    flat = [jax.tree_util.tree_flatten(m) for m in modules]
+    leaves = [jnp.stack(xs) for xs in zip(*(f[0] for f in flat))]
+    return jax.tree_util.tree_unflatten(flat[0][1], leaves)
 
 
 class Group(NamedTuple):
