@@ -56,7 +56,7 @@ def test_fast_path_equals_generic_path():
 def _scene_groups():
     from nsga_jax.scenes import load_scene
 
-    return {name: load_scene(name).model.elements
+    return {name: load_scene(name).model.bodies[0].elements
             for name in ("impacting_bar", "flexible_pendulum", "flexible_cube")}
 
 

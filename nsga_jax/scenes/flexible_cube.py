@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..results import ConfigError
 from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
@@ -28,25 +26,27 @@ def check(p):
 
 
 def make(p, concrete):
+    """The cube as a system: a :class:`~nsga_jax.system.HexSolid` centred at
+    height ``height`` above the floor z = 0, gravity along -z, and its bottom
+    face's nodes against the floor."""
     import jax
     import jax.numpy as jnp
 
-    from ..assembly import StaticIndex
-    from ..elements.hex8 import structured_hex_mesh
-    from ..models.solid import HexSolid
+    from ..system import Gravity, HexSolid, PlaneContact, System
 
     n = concrete["divisions"]
-    unit, conn = structured_hex_mesh((1.0, 1.0, 1.0), (n, n, n), (-0.5, -0.5, -0.5))
-    bottom = np.nonzero(np.isclose(unit[:, 2], -0.5))[0]
-    corner = int(bottom[0])  # node x1: the bottom corner at (-a/2, -a/2)
-    top = int(np.nonzero(np.isclose(unit[:, :2], unit[corner, :2]).all(axis=1) & np.isclose(unit[:, 2], 0.5))[0][0])
-    nodes = p["side"] * jnp.asarray(unit) + jnp.stack([0.0, 0.0, p["height"]])
-    model = HexSolid(
-        reference_nodes=nodes, E=p["E"], nu=p["nu"], rho=p["rho"], gravity=p["gravity"], floor_z=0.0,
-        e=p["e"], connectivity=StaticIndex(conn), contact_nodes=StaticIndex(bottom),
-    )
-    q0 = nodes.reshape(-1)
-    v0 = jnp.zeros_like(q0).at[2::3].set(p["velocity"])
+    height, g = jnp.asarray(p["height"], float), jnp.asarray(p["gravity"], float)
+    zero = jnp.zeros_like(height)
+    cube = HexSolid(size=jnp.stack([p["side"]] * 3), divisions=(n, n, n), E=p["E"], nu=p["nu"], rho=p["rho"],
+                    position=jnp.stack([zero, zero, height]), velocity=jnp.stack([zero, zero, p["velocity"]]))
+    corner, top = cube.node(0, 0, 0), cube.node(0, 0, -1)  # x1: the bottom corner at (-a/2, -a/2); x8 above it
+    system = System(dim=3)
+    system.add_body("cube", cube)
+    system.add_contact("floor", PlaneContact("cube", normal=[0.0, 0.0, 1.0], origin=[0.0, 0.0, 0.0], e=p["e"],
+                                             nodes="bottom"))
+    system.add_force("gravity", Gravity(jnp.stack([zero, zero, -g])))
+    model = system.model()  # the scene's check has refused an initial penetration
+    q0, v0 = model.initial_state()
     energy = jax.jit(jax.vmap(model.energy))
 
     def observables(sol):

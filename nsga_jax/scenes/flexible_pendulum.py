@@ -38,22 +38,28 @@ def check(p):
 
 
 def make(p, concrete):
+    """The pendulum as a system: a :class:`~nsga_jax.system.Beam2D` pinned to the
+    ground at its root (the origin), gravity along -y, and the wall's line
+    x = ``wall_x`` facing the tip node from the side where the tip starts."""
     import jax
     import jax.numpy as jnp
 
-    from ..models.beam2d import PlanarBeam
+    from ..system import Beam2D, Gravity, Pin, PlaneContact, System
 
-    A, I = p["area"], p["inertia"]
-    G = p["E"] / (2.0 * (1.0 + p["nu"]))
     side = math.copysign(1.0, _offset(concrete))
-    model = PlanarBeam(
-        EA=p["E"] * A, GAs=G * p["shear_factor"] * A, EI=p["E"] * I, length=p["length"], rhoA=p["rho"] * A,
-        rhoI=p["rho"] * I, gravity=p["gravity"], root=jnp.zeros(2), angle=p["angle"], wall_x=p["wall_x"],
-        side=side, e=p["e"], tip_load=jnp.zeros(3), n_elements=concrete["n_elements"],
-        pinned=True, wall=True, lumped=concrete["mass_matrix"] == "lumped",
-    )
-    q0 = model.reference()
-    v0 = jnp.zeros_like(q0)
+    system = System(dim=2)
+    system.add_body("beam", Beam2D(E=p["E"], nu=p["nu"], rho=p["rho"], area=p["area"], second_moment=p["inertia"],
+                                   length=p["length"], n_elements=concrete["n_elements"], position=jnp.zeros(2),
+                                   angle=p["angle"], shear_factor=p["shear_factor"],
+                                   lumped=concrete["mass_matrix"] == "lumped"))
+    system.add_joint("pivot", Pin("beam", "ground", node_a=0, at_b=jnp.zeros(2)))
+    system.add_contact("wall", PlaneContact("beam", normal=[side, 0.0],
+                                            origin=jnp.stack([jnp.asarray(p["wall_x"], float), jnp.zeros(())]),
+                                            e=p["e"], nodes=[-1]))
+    g = jnp.asarray(p["gravity"], float)
+    system.add_force("gravity", Gravity(jnp.stack([jnp.zeros_like(g), -g])))
+    model = system.model()  # the scene's check has refused an initial penetration
+    q0, v0 = model.initial_state()
     energy = jax.vmap(model.energy)
 
     def observables(sol):

@@ -32,16 +32,23 @@ def check(p):
 
 
 def make(p, concrete):
+    """The bar as a system: a :class:`~nsga_jax.system.Bar` from x = -length to
+    its tip at x = 0, moving at ``velocity``, and the wall at x = ``gap``
+    facing the tip node. Coordinates: the nodal displacements u."""
     import jax.numpy as jnp
 
-    from ..models.bar import ElasticBar
+    from ..system import Bar, PlaneContact, System
 
     ne = concrete["n_elements"]
     node045 = _node045(concrete)
-    model = ElasticBar(E=p["E"], rho=p["rho"], area=p["area"], length=p["length"], gap0=p["gap"],
-                       e=p["e"], n_elements=ne, lumped=concrete["mass_matrix"] == "lumped")
-    q0 = jnp.zeros(ne + 1)
-    v0 = jnp.full(ne + 1, p["velocity"], dtype=float)
+    system = System(dim=1)
+    system.add_body("bar", Bar(E=p["E"], rho=p["rho"], area=p["area"], length=p["length"], n_elements=ne,
+                               position=-jnp.asarray(p["length"], float), velocity=p["velocity"],
+                               lumped=concrete["mass_matrix"] == "lumped"))
+    system.add_contact("wall", PlaneContact("bar", normal=[-1.0], origin=jnp.reshape(p["gap"], (1,)), e=p["e"],
+                                            nodes=[-1]))
+    model = system.model()  # the scene's check has refused an initial penetration
+    q0, v0 = model.initial_state()
 
     def observables(sol):
         zeros = jnp.zeros(ne + 1)

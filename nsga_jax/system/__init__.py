@@ -8,7 +8,7 @@ from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, Abstract
 from .bodies import PointMass, RigidBody2D
 from .builder import System, check_initial_state
 from .contacts import PlaneContact, SphereContact
-from .flexible import Beam2D
+from .flexible import Bar, Beam2D, HexSolid
 from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
 from .joints import Distance, Pin, Slider, Weld
 from .joints3d import Revolute, Weld3D
@@ -17,7 +17,8 @@ from .rigid3d import RigidBody3D
 
 __all__ = [
     "GROUND", "AbstractBody", "AbstractContact", "AbstractForce", "AbstractJoint", "Ground",
-    "PointMass", "RigidBody2D", "Beam2D", "System", "check_initial_state", "PlaneContact", "SphereContact",
+    "PointMass", "RigidBody2D", "Bar", "Beam2D", "HexSolid", "System", "check_initial_state", "PlaneContact",
+    "SphereContact",
     "Gravity", "PrescribedForce", "SpringDamper", "TorsionalSpring", "Distance", "Pin", "Slider", "Weld",
     "RigidBody3D", "Revolute", "Weld3D",
     "SystemModel",

@@ -13,8 +13,29 @@ import numpy as np
 
 from .._custom_types import Scalar, Vector
 from .._util import as_float
+from ..results import ConfigError
 from ..validation import UNIT_INTERVAL, Range
-from .base import AbstractContact, point
+from .base import AbstractBody, AbstractContact, point
+
+
+def _nodes(x) -> tuple[int, ...] | str | None:
+    """Node indices as a tuple of ints; a name (a node set of the body) as it is."""
+    return x if x is None or isinstance(x, str) else tuple(int(i) for i in np.ravel(x))
+
+
+def node_indices(body: AbstractBody, nodes: tuple[int, ...] | str) -> tuple[int, ...]:
+    """Node indices named by ``nodes``: indices as they are, a name resolved
+    by the body's ``node_set`` (a solid's faces: ``"bottom"``, ...)."""
+    return body.node_set(nodes) if isinstance(nodes, str) else nodes  # type: ignore[attr-defined]
+
+
+def node_points(body: AbstractBody, q: Vector, nodes: tuple[int, ...]) -> Vector:
+    """World positions (k, dim) [m] of the body's ``nodes``: in one gather where
+    the body has ``node_positions`` (a solid's face of many nodes), else node by node."""
+    gather = getattr(body, "node_positions", None)
+    if gather is not None:
+        return gather(q, nodes)
+    return jnp.stack([point(body, q, jnp.zeros((0,), q.dtype), i) for i in nodes])
 
 
 class PlaneContact(AbstractContact):
@@ -24,7 +45,8 @@ class PlaneContact(AbstractContact):
     radius, each point is the centre of a sphere (circle) of that radius.
 
     The points are ``points`` (body-frame coordinates, (k, dim), on a rigid
-    body; ``None``: its origin) or ``nodes`` (indices, on a flexible body).
+    body; ``None``: its origin) or ``nodes`` (indices, on a flexible body, or
+    the name of one of its node sets: a solid's face, ``nodes="bottom"``).
 
     Attributes:
         normal: (dim,), normalised at evaluation. origin: (dim,) [m].
@@ -37,9 +59,7 @@ class PlaneContact(AbstractContact):
     e: Vector = eqx.field(converter=as_float)
     points: Vector | None = eqx.field(converter=lambda x: None if x is None else as_float(x), default=None,
                                       kw_only=True)
-    nodes: tuple[int, ...] | None = eqx.field(static=True, default=None, kw_only=True,
-                                              converter=lambda x: None if x is None else tuple(int(i) for i in
-                                                                                                np.ravel(x)))
+    nodes: tuple[int, ...] | str | None = eqx.field(static=True, default=None, kw_only=True, converter=_nodes)
     radius: Scalar = eqx.field(converter=as_float, default=0.0, kw_only=True)
 
     ranges = {"e": UNIT_INTERVAL, "radius": Range(0.0)}
@@ -62,16 +82,16 @@ class PlaneContact(AbstractContact):
 
     def count(self, bodies) -> int:
         if self.nodes is not None:
-            return len(self.nodes)
+            return len(node_indices(bodies[0], self.nodes))
         return 1 if self.points is None else self.points.shape[-2]
 
     def evaluate(self, bodies, qs):
         body, q = bodies[0], qs[0]
         n = self.normal / jnp.linalg.norm(self.normal)
         if self.nodes is not None:
-            x = jnp.stack([point(body, q, jnp.zeros((0,)), i) for i in self.nodes])
+            x = node_points(body, q, node_indices(body, self.nodes))
         elif self.points is None:
-            x = point(body, q, jnp.zeros((0,)), None)[None]
+            x = point(body, q, jnp.zeros((0,), q.dtype), None)[None]
         else:
             x = jax.vmap(lambda X: point(body, q, X, None))(self.points)
         return (x - self.origin.astype(q.dtype)) @ n.astype(q.dtype) - self.radius
@@ -92,6 +112,14 @@ class PlaneContact(AbstractContact):
             return "a flexible body's points are named by nodes = [...]"
         if not body.has_nodes and self.nodes is not None:
             return "a rigid body's points are named by points = [[...], ...] (body-frame coordinates)"
+        if isinstance(self.nodes, str):
+            if not hasattr(body, "node_set"):
+                return f"{type(body).__name__} has no named node sets: give nodes = [indices]"
+            try:
+                body.node_set(self.nodes)
+            except ConfigError as error:
+                return str(error)
+            return None
         for i in self.nodes or ():
             rule = body.invalid_anchor(jnp.zeros((0,)), i)
             if rule:
