@@ -52,7 +52,7 @@ def test_catalog_fields_come_from_the_constructors():
     rigid = fields(RigidBody2D)
     assert rigid["velocity"].default == (0.0, 0.0) and rigid["inertia"].unit == "kg m^2"
     plane = fields(PlaneContact)
-    assert plane["body"].kind == "str" and plane["nodes"].kind == "ints" and plane["e"].range.hi == 1.0
+    assert plane["body"].kind == "str" and plane["nodes"].kind == "nodes" and plane["e"].range.hi == 1.0
     assert fields(TorsionalSpring)["stiffness"].unit == "N m/rad"  # a class's own unit
     beam = fields(CATALOG["bodies"]["beam_2d"])
     assert beam["n_elements"].kind == "int" and beam["lumped"].kind == "bool" and beam["E"].unit == "Pa"
@@ -401,3 +401,39 @@ def test_convergence_of_a_system_file(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "ds h = 0.02" in printed and "ball.x" in printed and "ball.y" in printed  # positions by default
     assert (out / "study.csv").exists()
+
+
+SOLID = """\
+[system]
+dim = 3
+gravity = [0.0, 0.0, -9.81]
+
+[bodies.cube]
+type = "hex_solid"
+size = [0.1, 0.1, 0.1]
+divisions = [2, 2, 2]
+E = 90.0
+nu = 0.3
+rho = 1.0
+position = [0.0, 0.0, 0.2]
+
+[contacts.floor]
+type = "plane"
+body = "cube"
+normal = [0.0, 0.0, 1.0]
+origin = [0.0, 0.0, 0.0]
+e = 0.0
+nodes = "bottom"
+"""
+
+
+@pytest.mark.usefixtures("no_compilation")
+def test_a_solid_face_names_its_contact_nodes(tmp_path):
+    path = tmp_path / "solid.toml"
+    path.write_text(SOLID)
+    scene = load_scene(path)
+    assert scene.model.n_unilateral == 9 and scene.model.n_dof == 81
+    np.testing.assert_allclose(scene.model.unilateral(scene.q0), 0.15, rtol=1e-14)  # the bottom face, 0.05 m below
+    path.write_text(SOLID.replace('"bottom"', '"bottm"'))
+    with pytest.raises(ConfigError, match=r"contacts\.floor: HexSolid has no face 'bottm'; its faces: left"):
+        load_scene(path)

@@ -104,10 +104,12 @@ def _structure(path: str, value: Any, kind: str) -> Any:
           "bool": lambda v: isinstance(v, bool),
           "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
           "ints": lambda v: isinstance(v, list) and all(isinstance(i, int) and not isinstance(i, bool) for i in v),
-          "strs": lambda v: isinstance(v, list) and all(isinstance(s, str) for s in v)}[kind]
+          "strs": lambda v: isinstance(v, list) and all(isinstance(s, str) for s in v),
+          "nodes": lambda v: isinstance(v, str) or (isinstance(v, list) and all(
+              isinstance(i, int) and not isinstance(i, bool) for i in v))}[kind]
     if not ok(value):
         raise ConfigError(f"{path} must be {STRUCTURE_KINDS[kind]}, got {_type_name(value)}")
-    return tuple(value) if kind in ("ints", "strs") else value
+    return tuple(value) if kind in ("ints", "strs", "nodes") and isinstance(value, list) else value
 
 
 def _signature_text(type_name: str, specs: dict[str, Field]) -> str:
@@ -226,6 +228,8 @@ def parse_system(path: Path, data: dict[str, Any]) -> tuple[str, str, SystemDesc
         if p.kind == "bodies":
             continue
         for key, value in p.fixed.items():
+            if key == "nodes":
+                continue  # node indices, or a face of the body (checked by the body)
             refs = (value,) if isinstance(value, str) else value if isinstance(value, tuple) else ()
             for ref in refs:
                 if isinstance(ref, str) and ref != GROUND and ref not in bodies:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import importlib
 import inspect
 from dataclasses import dataclass
 from typing import Any
@@ -21,46 +20,30 @@ from ..validation import Range
 from .base import AbstractPart
 from .bodies import PointMass, RigidBody2D
 from .contacts import PlaneContact, SphereContact
-from .flexible import Beam2D
+from .flexible import Bar, Beam2D, HexSolid
 from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
 from .joints import Distance, Pin, Slider, Weld
+from .joints3d import Revolute, Weld3D
+from .rigid3d import RigidBody3D
 
 CATALOG: dict[str, dict[str, type[AbstractPart]]] = {
-    "bodies": {"point_mass": PointMass, "rigid_body_2d": RigidBody2D, "beam_2d": Beam2D},
-    "joints": {"pin": Pin, "distance": Distance, "weld": Weld, "slider": Slider},
+    "bodies": {"point_mass": PointMass, "rigid_body_2d": RigidBody2D, "rigid_body_3d": RigidBody3D,
+               "bar": Bar, "beam_2d": Beam2D, "hex_solid": HexSolid},
+    "joints": {"pin": Pin, "distance": Distance, "weld": Weld, "slider": Slider, "revolute": Revolute,
+               "weld_3d": Weld3D},
     "contacts": {"plane": PlaneContact, "sphere": SphereContact},
     "forces": {"gravity": Gravity, "spring_damper": SpringDamper, "torsional_spring": TorsionalSpring,
                "prescribed": PrescribedForce},
 }
 """``{kind: {type name: part class}}`` for the four kinds of parts (the tables of a system file)."""
 
-OPTIONAL = (
-    ("bodies", "rigid_body_3d", "rigid3d", "RigidBody3D"),
-    ("joints", "revolute", "rigid3d", "Revolute"),
-    ("bodies", "bar", "flexible", "Bar"),
-    ("bodies", "hex_solid", "flexible", "HexSolid"),
-)
-"""``(kind, type name, module of nsga_jax.system, class)`` entries added where the class exists."""
-
-
-def _add_optional() -> None:
-    for kind, type_name, module, name in OPTIONAL:
-        try:
-            cls = getattr(importlib.import_module(f".{module}", __package__), name, None)
-        except ModuleNotFoundError:
-            continue
-        if cls is not None:
-            CATALOG[kind].setdefault(type_name, cls)
-
-
-_add_optional()
-
 UNITS: dict[str, str] = {
     "mass": "kg", "inertia": "kg m^2", "position": "m", "velocity": "m/s", "angle": "rad",
     "angular_velocity": "rad/s", "E": "Pa", "rho": "kg/m^3", "area": "m^2", "second_moment": "m^4",
     "length": "m", "at": "m", "at_a": "m", "at_b": "m", "scale": "m", "origin": "m", "points": "m", "radius": "m",
     "radius_a": "m", "radius_b": "m", "acceleration": "m/s^2", "stiffness": "N/m", "rest_length": "m",
-    "damping": "N s/m", "rest_angle": "rad", "direction": "N", "frequency": "Hz", "phase": "rad",
+    "damping": "N s/m", "rest_angle": "rad", "direction": "N", "frequency": "Hz", "phase": "rad", "size": "m",
+    "axis": "", "axis_b": "", "rotation": "",
 }
 """The SI unit of a float field, by argument name (``""``: dimensionless or not listed)."""
 
@@ -70,7 +53,8 @@ CLASS_UNITS: dict[type, dict[str, str]] = {
 """Units that differ from :data:`UNITS` for one class."""
 
 STRUCTURE_KINDS = {"str": "a string", "int": "an integer", "bool": "true or false", "ints": "a list of integers",
-                   "strs": "a list of strings", "number": "a number"}
+                   "strs": "a list of strings", "number": "a number",
+                   "nodes": "a list of node indices or a face name (a solid's \"bottom\", \"top\", ...)"}
 """What each kind of structural field holds, for error messages."""
 
 
@@ -130,7 +114,7 @@ def fields(cls: type[AbstractPart]) -> dict[str, Field]:
         required = arg.default is inspect.Parameter.empty
         default = None if required else arg.default
         if field is not None and field.metadata.get("static", False):
-            kind = _structure_kind(str(field.type))
+            kind = "nodes" if arg.name == "nodes" else _structure_kind(str(field.type))
             if kind is None:
                 continue
             out[arg.name] = Field(arg.name, kind, required, default)
@@ -145,4 +129,4 @@ def part_class(kind: str, type_name: str) -> type[AbstractPart]:
     return CATALOG[kind][type_name]
 
 
-__all__ = ["CATALOG", "CLASS_UNITS", "Field", "OPTIONAL", "STRUCTURE_KINDS", "UNITS", "fields", "part_class"]
+__all__ = ["CATALOG", "CLASS_UNITS", "Field", "STRUCTURE_KINDS", "UNITS", "fields", "part_class"]
