@@ -100,12 +100,21 @@ def call(group: Group, fn: Callable, module: Any, *args: Any) -> Any:
 
 
 def scatter_vector(x: Vector, columns: Any, values: jax.Array) -> Vector:
-    """``x`` with a slot's values added at its columns."""
+    """``x`` with a slot's values added at its columns. A slice's values are
+    padded to x's length and added (an elementwise sum the compiler fuses;
+    on the CPU a scatter-add is a loop of its own, and a small system's step
+    holds dozens of them)."""
+    if isinstance(columns, slice):
+        return x + jnp.pad(values, (columns.start, x.shape[0] - columns.stop))
     return x.at[columns].add(values)
 
 
 def scatter_block(A: jax.Array, rows: Any, columns: Any, values: jax.Array) -> jax.Array:
-    """``A`` with member blocks (m, r, k) (or one (r, k)) added at rows × columns."""
+    """``A`` with member blocks (m, r, k) (or one (r, k)) added at rows × columns
+    (two slices: padded and added, as in :func:`scatter_vector`)."""
+    if isinstance(rows, slice) and isinstance(columns, slice):
+        pads = ((rows.start, A.shape[0] - rows.stop), (columns.start, A.shape[1] - columns.stop))
+        return A + jnp.pad(values, pads)
     if isinstance(rows, slice):
         return A.at[rows, columns].add(values)
     return A.at[rows[:, :, None], columns[:, None, :]].add(values)

@@ -323,7 +323,7 @@ def _constraint_vector(model: SystemModel, q: Vector, which: str) -> ConstraintV
     for group, module, bodies, fn, _ in layout.row_groups(model, which):
         rows = shift(group.rows, -offset)
         (qs,) = layout.slot_coordinates(model, group, q)
-        g = g.at[rows].set(call(group, fn, module, bodies, qs))
+        g = scatter_vector(g, rows, call(group, fn, module, bodies, qs))  # rows disjoint, g from zeros
     return g
 
 
