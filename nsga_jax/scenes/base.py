@@ -174,20 +174,26 @@ def parse_override(text: str) -> tuple[str, Any]:
 SCENE_FILE_SUFFIXES = (".toml", ".py")
 
 
-def _read_config(path: Path) -> dict[str, Any]:
-    """A TOML config's tables, checked for shape: ``scene`` a string,
-    ``parameters`` and ``solver`` tables, nothing else."""
-    if not path.is_file():
-        what = "is a folder" if path.is_dir() else "does not exist"
-        raise ConfigError(f"config file {str(path)!r} {what}")
+def read_toml(path: Path) -> dict[str, Any]:
+    """A TOML file's tables; a file that is not UTF-8, not TOML or not
+    readable is a :class:`ConfigError` naming the path and why."""
     try:
-        data = tomllib.loads(path.read_bytes().decode("utf-8"))
+        return tomllib.loads(path.read_bytes().decode("utf-8"))
     except UnicodeDecodeError as err:
         raise ConfigError(f"{path}: not a UTF-8 text file ({err.reason} at byte {err.start})") from None
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: invalid TOML: {err}") from None
     except OSError as err:
         raise ConfigError(f"{path}: cannot be read ({err.strerror})") from None
+
+
+def _read_config(path: Path) -> dict[str, Any]:
+    """A TOML config's tables, checked for shape: ``scene`` a string,
+    ``parameters`` and ``solver`` tables, nothing else."""
+    if not path.is_file():
+        what = "is a folder" if path.is_dir() else "does not exist"
+        raise ConfigError(f"config file {str(path)!r} {what}")
+    data = read_toml(path)
     unknown = sorted(set(data) - {"scene", "parameters", "solver"})
     if unknown:
         raise ConfigError(f"{path}: unknown top-level key {unknown[0]!r}; allowed: scene, parameters, solver")

@@ -43,12 +43,11 @@ allowed) and registers its :class:`~nsga_jax.scenes.SceneSpec`.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Any
 
 from ..results import ConfigError
-from .base import REGISTRY, SceneSpec, register
+from .base import REGISTRY, SceneSpec, read_toml, register
 from .system_observables import observable_units, observables_of
 from .system_parse import build_system, component_paths, numbers, parse_system
 
@@ -76,15 +75,11 @@ def _read_toml(path: Path) -> dict[str, Any]:
     path = path.expanduser().resolve()
     try:
         stamp = _stamp(path)
-        if path in _TOML and _TOML[path][0] == stamp:
-            return _TOML[path][1]
-        data = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except UnicodeDecodeError as err:
-        raise ConfigError(f"{path}: not a UTF-8 text file ({err.reason} at byte {err.start})") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: invalid TOML: {err}") from None
     except OSError as err:
         raise ConfigError(f"{path}: cannot be read ({err.strerror})") from None
+    if path in _TOML and _TOML[path][0] == stamp:
+        return _TOML[path][1]
+    data = read_toml(path)
     _TOML[path] = (stamp, data)
     return data
 
