@@ -156,7 +156,8 @@ BAD_FILES = [
     (BALL, "mass = 0.5 ", "mas = 0.5 ", r"bodies.ball: unknown key 'mas' for type 'point_mass'; allowed: type, mass"),
     (BALL, 'normal = [0.0, 1.0]', 'normal = [0.0, 1.0]\nrestitution = 1', r"contacts.floor: unknown key 'restitution'"),
     (BALL, 'type = "point_mass"', 'type = "point_mas"', r"bodies.ball.type: unknown body type 'point_mas'; "
-                                                        r"allowed: point_mass, rigid_body_2d, rigid_body_3d, bar, beam_2d, hex_solid"),
+                                                        r"allowed: point_mass, rigid_body_2d, rigid_body_3d, "
+                                                        r"bar, beam_2d, hex_solid"),
     (PENDULUM, 'type = "pin"', 'type = "hinge"', r"joints.pivot.type: unknown joint type 'hinge'; allowed: pin,"),
     (BALL, 'type = "plane"', 'kind = "plane"', r"contacts.floor: missing key 'type'; allowed types: plane, sphere"),
     (BALL, "mass = 0.5 ", 'mass = "heavy" ', r"bodies.ball.mass must be a number, got str 'heavy'"),
