@@ -8,12 +8,13 @@ from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, Abstract
 from .bodies import PointMass, RigidBody2D
 from .builder import System, check_initial_state
 from .contacts import PlaneContact, SphereContact
-from .flexible import Bar, Beam2D, HexSolid
+from .flexible import Bar, Beam2D
 from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
 from .joints import Distance, Pin, Slider, Weld
 from .joints3d import Revolute, Weld3D
 from .model import SystemModel
 from .rigid3d import RigidBody3D
+from .solid import HexSolid
 
 __all__ = [
     "GROUND", "AbstractBody", "AbstractContact", "AbstractForce", "AbstractJoint", "Ground",

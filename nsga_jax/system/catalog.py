@@ -20,11 +20,12 @@ from ..validation import Range
 from .base import AbstractPart
 from .bodies import PointMass, RigidBody2D
 from .contacts import PlaneContact, SphereContact
-from .flexible import Bar, Beam2D, HexSolid
+from .flexible import Bar, Beam2D
 from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
 from .joints import Distance, Pin, Slider, Weld
 from .joints3d import Revolute, Weld3D
 from .rigid3d import RigidBody3D
+from .solid import HexSolid
 
 CATALOG: dict[str, dict[str, type[AbstractPart]]] = {
     "bodies": {"point_mass": PointMass, "rigid_body_2d": RigidBody2D, "rigid_body_3d": RigidBody3D,
