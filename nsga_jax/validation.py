@@ -238,7 +238,7 @@ def check_model_fields(model) -> None:
             raise ConfigError(f"{cls}{jax.tree_util.keystr(path)} must be finite, got {values.tolist()}")
     for name, rng in model.ranges.items():
         value = getattr(model, name)
-        if isinstance(value, jax.core.Tracer):
+        if value is None or isinstance(value, jax.core.Tracer):  # None: an optional field left out
             continue
         value = np.asarray(value)
         if not rng.contains(value):

@@ -26,6 +26,7 @@ from .base import (
     StepState,
 )
 from .ds import DS, AbstractGenAlpha
+from .friction import velocity_start
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, PositionAux, StepOutput, SubproblemRecord, VelocityAux, make_output
 from .residuals import DIVERGENCE_FACTOR
@@ -108,7 +109,7 @@ class CS(AbstractGenAlpha):
             return jnp.stack([r.bound for r in rs])
 
         x0 = (smooth_start(v_pred, model.n_bilateral), projection_start(model, q_pred),
-              projection_start(model, q_pred))
+              velocity_start(model, q_pred))
         r0 = residuals(*x0)
         n0 = norms(r0)
 
@@ -161,6 +162,6 @@ class CS(AbstractGenAlpha):
             model, t, q, v, rs.aux, newton, result,
             nu=jnp.where(position.active, position.multiplier, 0.0),
             impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
-            active_position=position.active, active_velocity=velocity.active,
+            active_position=position.active, active_velocity=velocity.active, friction=velocity.friction,
         )
         return self.finalise(t, q, v, vd, a_pred), out

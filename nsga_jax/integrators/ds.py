@@ -6,7 +6,8 @@ One step n -> n+1 is the strict sequence
 0. predictor (Algorithm 1, lines 5-9);
 1. smooth motion -- Newton on Δṽ (and Δλ̃), unilateral constraints ignored;
 2. position correction -- semi-smooth Newton on (U, ν);
-3. velocity jump -- semi-smooth Newton on (W, Λ);
+3. velocity jump -- semi-smooth Newton on (W, Λ), with Coulomb friction
+   where the model has it (:mod:`~nsga_jax.integrators.friction`);
 4. finalise: q = q̃ + U, v = ṽ + W, a += (1-αf)/(1-αm) v̇̃ (line 41).
 
 Sub-problem 1 never sees U or W and sub-problem 2 never sees W: each takes
@@ -35,6 +36,7 @@ from .base import (
     StepState,
 )
 from .coefficients import GenAlphaCoefficients
+from .friction import velocity_start
 from .iteration_matrix import Held
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
@@ -182,7 +184,7 @@ class DS(AbstractGenAlpha):
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
         sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth,
                                          G_prev_v_prev, self.nonsmooth_forces),
-                      projection_start(model, qt), self.max_iter, held[2], name="velocity_jump")
+                      velocity_start(model, qt), self.max_iter, held[2], name="velocity_jump")
         W, _ = sol_v.x
         velocity: VelocityAux = sol_v.aux
 
@@ -194,7 +196,7 @@ class DS(AbstractGenAlpha):
             model, t, q, v, smooth.lam, newton, first_failure([subproblem_result(k, r) for k, r in solved.items()]),
             nu=jnp.where(position.active, position.multiplier, 0.0),
             impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
-            active_position=position.active, active_velocity=velocity.active,
+            active_position=position.active, active_velocity=velocity.active, friction=velocity.friction,
         )
         return self.finalise(t, q, v, vd, a_pred, kept(results, state)), out
 

@@ -9,13 +9,17 @@ Per step, with q_{n+1} = q_n + h (θ v_{n+1} + (1-θ) v_n):
         0 <= g_q^j v_{n+1} + e_j g_q^j(q_n) v_n  ⊥  Λ_j >= 0,
 
 solved by the same semi-smooth augmented-Lagrangian Newton as the NSGA
-sub-problems (σ = kv Λ - pv ġ). Constraints are imposed at velocity level
-only, so position-level violations (penetration, joint drift) accumulate.
+sub-problems (σ = kv Λ - pv ġ), and with the same Alart–Curnier Coulomb law
+on frictional contacts (:mod:`~nsga_jax.integrators.friction`; the slip
+velocity g_T(q_{n+1}) v_{n+1} on the contacts of the closed set).
+Constraints are imposed at velocity level only, so position-level
+violations (penetration, joint drift) accumulate.
 """
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._custom_types import Scalar, ScalarLike, Vector
@@ -25,6 +29,7 @@ from .base import (
     AbstractScheme,
     StepState,
 )
+from .friction import FrictionLaw, has_friction, velocity_rows, velocity_start
 from .linalg import solve_bordered
 from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve
@@ -80,7 +85,8 @@ class MJ(AbstractScheme):
             candidates = ~is_unilateral(model) | closing
             restituted = restitution(model, q_n.dtype) * (ops.constraints.jacobian(model, q_n) @ v_n)
         args = (model, ops, tol, t, h, self.theta, q_n, v_n, f_n, candidates, restituted)
-        x0 = (v_n, jnp.zeros((model.n_constraints,), q_n.dtype))
+        x0 = velocity_start(model, v_n)
+        x0 = (v_n, x0[1])
         sol = solve(moreau_jean_problem, args, x0, self.max_iter, name="moreau_jean")
         v, _ = sol.x
         q = q_n + h * (self.theta * v + (1.0 - self.theta) * v_n)
@@ -88,7 +94,7 @@ class MJ(AbstractScheme):
         if model.n_constraints:
             aux: VelocityAux = sol.aux
             kwargs = dict(impulse=jnp.where(aux.active, aux.multiplier, 0.0), gdot=aux.rate,
-                          active_velocity=aux.active)
+                          active_velocity=aux.active, friction=aux.friction)
         (name,) = self.subproblems
         newton = NewtonRecord.of(self.subproblems, {name: SubproblemRecord.of(sol)}, q.dtype)
         out = make_output(model, t, q, v, jnp.zeros((model.n_bilateral,), q.dtype), newton,
@@ -100,24 +106,39 @@ class MJ(AbstractScheme):
 def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n, f_n, candidates, restituted):
     """The Moreau–Jean step as a Newton problem on x = (v_{n+1}, Λ):
     ``[M(q)(v - v_n) - h (θ f(q, v) + (1-θ) f_n) - g_q^{B T} σ^B;  -kv ġ^B;  -(kv²/pv) Λ^{B̄}]``,
-    q = q_n + h (θ v + (1-θ) v_n), ġ = g_q(q) v + e g_q(q_n) v_n, B = candidates ∩ {σ >= 0}."""
+    q = q_n + h (θ v + (1-θ) v_n), ġ = g_q(q) v + e g_q(q_n) v_n, B = candidates ∩ {σ >= 0};
+    with friction, Λ and the residual gain the tangential rows of
+    :mod:`~nsga_jax.integrators.friction`."""
     tol_r, tol_f, _ = tol
-    n = model.n_dof
+    n, nc = model.n_dof, model.n_constraints
     kv = pv = Scaling.of(model, h).kv
     unilateral = is_unilateral(model)
+    law = FrictionLaw.of(model, candidates, unilateral, kv, pv, q_n.dtype) if has_friction(model) else None
 
     def position(v):
         return q_n + h * (theta * v + (1.0 - theta) * v_n)
+
+    def rows(q):
+        """g_q(q) (and g_T(q) below it, with friction) and the restitution term of each row."""
+        G = ops.constraints.jacobian(model, q)
+        if law is None:
+            return G, restituted
+        G = velocity_rows(model, q, G)
+        return G, jnp.concatenate([restituted, jnp.zeros((G.shape[0] - nc,), q.dtype)])
 
     def residual(x):
         v, Lam = x
         q = position(v)
         inertia = ops.mass.product(model, q, v - v_n)
         force = h * (theta * model.force(q, v, t) + (1.0 - theta) * f_n)
-        if model.n_constraints == 0:
+        if nc == 0:
             return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())
-        G = ops.constraints.jacobian(model, q)
-        gdot = G @ v + restituted
+        G, e_term = rows(q)
+        gdot = G @ v + e_term
+        if law is not None:
+            res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
+            active, aug, tangential = res.aux
+            return res._replace(aux=VelocityAux(active, aug, gdot[:nc], tangential))
         res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
         return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
 
@@ -130,18 +151,28 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
         def matrix():  # M + hθ C + (hθ)² K, with the inertia stiffness and the constraint curvature
             A = ops.mass.matrix(model, q) + h * theta * C + (h * theta) ** 2 * K
             A = A + h * theta * model.inertia_stiffness(q, v - v_n)
-            if model.n_constraints:
-                active, sigma, _ = res.aux
+            if nc:
+                active, sigma = res.aux[0], res.aux[1]
                 A = A - h * theta * curvature(model, q, jnp.where(active, sigma, 0.0))
+            if law is not None and not model.linear_constraints:  # d(g_T^T P_T)/dq
+                A = A - h * theta * jax.jacfwd(lambda y: model.tangent_jacobian(y).T @ res.aux.friction)(q)
             return A, K_norm, C_norm
 
         A = ops.velocity.factored(matrix)
-        if model.n_constraints == 0:
+        if nc == 0:
             return (-A.solve(res.r), Lam), floor
-        G = ops.constraints.jacobian(model, q)
+        G, e_term = rows(q)
         floor = floor + constraint_floor(kv, G, v)
-        G_low = G + h * theta * convective(model, q, v)
-        dv, dLam = solve_bordered(A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv)
+        G_low = G[:nc] + h * theta * convective(model, q, v)
+        if law is None:
+            dv, dLam = solve_bordered(A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv)
+            return (dv, dLam), floor
+        if not model.linear_constraints:  # d(g_T v)/dq, the tangential rows' convective part
+            G_low = jnp.concatenate([G_low, G[nc:] + h * theta * jax.jacfwd(
+                lambda y: model.tangent_jacobian(y) @ v)(q)])
+        else:
+            G_low = jnp.concatenate([G_low, G[nc:]])
+        dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G_low, Lam, G @ v + e_term)
         return (dv, dLam), floor
 
     return Problem.from_update(residual, update)

@@ -67,6 +67,9 @@ class VelocityAux(NamedTuple):
     active: ActiveSet
     multiplier: ConstraintVector
     rate: ConstraintVector
+    friction: jax.Array | None = None
+    """The tangential impulses P_T (nf · d,) [N s] of the frictional contacts
+    (``None`` without friction)."""
 
 
 # ------------------------------------------------------------ Newton statistics
@@ -148,6 +151,8 @@ class StepOutput(eqx.Module):
     nu (nc,): position multipliers; impulse (nc,): Λ [N s] on the velocity
     active set; gap (nu,): g^U(q_{n+1}); bilateral (nb,): g^B(q_{n+1});
     bilateral_rate (nb,): g_q^B v_{n+1}; active_position, active_velocity (nc,);
+    friction (nf · d,): the tangential impulses P_T [N s] of the frictional
+    contacts, contact by contact (empty without friction);
     newton: the :class:`NewtonRecord` of the scheme's sub-problems;
     result: the code of the step's :data:`~nsga_jax.results.RESULTS` member
     (int32; ``Result(code)`` on the host, :func:`~nsga_jax.results.from_code` in JAX).
@@ -164,12 +169,13 @@ class StepOutput(eqx.Module):
     bilateral_rate: jax.Array
     active_position: PerConstraintFlag
     active_velocity: PerConstraintFlag
+    friction: jax.Array
     newton: NewtonRecord
     result: PerStep
 
 
 def make_output(model: Model, t, q, v, lam, newton: NewtonRecord, result, nu=None, impulse=None, g=None, gdot=None,
-                active_position=None, active_velocity=None) -> StepOutput:
+                active_position=None, active_velocity=None, friction=None) -> StepOutput:
     """Assemble a :class:`StepOutput` (``result``: a :data:`~nsga_jax.results.RESULTS`
     member); constraint fields default to empty or zero."""
     nb, nc = model.n_bilateral, model.n_constraints
@@ -184,6 +190,7 @@ def make_output(model: Model, t, q, v, lam, newton: NewtonRecord, result, nu=Non
         gap=g[nb:], bilateral=g[:nb], bilateral_rate=gdot[:nb],
         active_position=no if active_position is None else active_position,
         active_velocity=no if active_velocity is None else active_velocity,
+        friction=jnp.zeros((model.n_friction * model.friction_dim,), q.dtype) if friction is None else friction,
         newton=newton, result=code_of(result),
     )
 
@@ -208,7 +215,8 @@ def output_template(model: Model, dtype, subproblems: Sequence[str]) -> StepOutp
     flags = f(nc, dtype=jnp.bool_)
     newton = NewtonRecord(names=tuple(subproblems), iterations=f(k, dtype=jnp.int32), residual=f(k), tolerance=f(k))
     return StepOutput(t=f(), q=f(n), v=f(n), lam=f(nb), nu=f(nc), impulse=f(nc), gap=f(nu), bilateral=f(nb),
-                      bilateral_rate=f(nb), active_position=flags, active_velocity=flags, newton=newton,
+                      bilateral_rate=f(nb), active_position=flags, active_velocity=flags,
+                      friction=f(model.n_friction * model.friction_dim), newton=newton,
                       result=f(dtype=jnp.int32))
 
 

@@ -15,7 +15,10 @@ makes it constant and a fresh LU factorisation otherwise
 - :func:`position_problem` (eqs. 37-38, matrix 48): x = (U, ν), q = q̃ + U,
   active set A from ξ = kp ν - pp g(q), with or without the h² f^p term (29);
 - :func:`velocity_problem` (eqs. 40-43, matrix 49): x = (W, Λ), v = ṽ + W,
-  active set B ⊆ A from σ = kv Λ - pv ġ, with or without the h f* term (8).
+  active set B ⊆ A from σ = kv Λ - pv ġ, with or without the h f* term (8);
+  with frictional contacts Λ also holds the tangential impulses
+  (:mod:`~nsga_jax.integrators.friction`). The position correction stays
+  frictionless: ν is a projection multiplier, not an impulse.
 
 DS runs them once each in sequence; DSn drops the f^p and f* terms (eqs.
 31a-b); CS evaluates the smooth problem at the total motion (q̃ + U, ṽ + W)
@@ -32,6 +35,7 @@ import jax.numpy as jnp
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
 from .coefficients import GenAlphaCoefficients
+from .friction import FrictionLaw, has_friction, velocity_rows
 from .linalg import solve_bordered
 from .model_terms import ForceAt, convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound
@@ -193,8 +197,11 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
                      with_forces: bool):
     """Step 3: residual [M(q) W - h f* - g_q^{B T} σ^B;  -kv ġ^B;  -(kv²/pv) Λ^{B̄}] with
     ġ = g_q v + e g_{q,n} v_n, σ = kv Λ - pv ġ, B = bilaterals ∪ {j ∈ A : σ_j >= 0};
-    ``aux = (B, σ, ġ)``. ``candidates`` is A; ``G_prev_v_prev`` is g_{q,n} v_n.
-    ``with_forces=False`` drops h f* (eq. 31a)."""
+    ``aux = (B, σ, ġ, P_T)``. ``candidates`` is A; ``G_prev_v_prev`` is g_{q,n} v_n.
+    ``with_forces=False`` drops h f* (eq. 31a). With frictional contacts the
+    multipliers gain the tangential Λ_T and the residual Alart–Curnier's rows
+    (:mod:`~nsga_jax.integrators.friction`); q = q̃ + U is fixed here, so the
+    tangents g_T(q) are evaluated once."""
     tol_r, tol_f, _ = tol
     n, nb = model.n_dof, model.n_bilateral
     kv = pv = Scaling.of(model, h).kv
@@ -202,6 +209,10 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     q = smooth.q + U
     G = ops.constraints.jacobian(model, q)
     restituted = restitution(model, q.dtype) * G_prev_v_prev
+    law = FrictionLaw.of(model, candidates, unilateral, kv, pv, q.dtype) if has_friction(model) else None
+    if law is not None:  # the rows whose rates the law constrains: g_q and g_T
+        G = velocity_rows(model, q, G)
+        restituted = jnp.concatenate([restituted, jnp.zeros((G.shape[0] - restituted.shape[0],), q.dtype)])
     f_const = None
     if with_forces:
         # terms of f* (eq. 8) that W does not change: (g_q^T - g̃_q^T) λ̃ - (M(q) - M(q̃)) v̇̃
@@ -225,8 +236,12 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             force = h * f_star
         else:
             force = jnp.zeros_like(W)
-        res = augmented_residual(ops.mass.product(model, q, W), force, G, gdot, Lam, kv, pv, candidates,
-                                 unilateral, tol_r, tol_f)
+        inertia = ops.mass.product(model, q, W)
+        if law is not None:
+            res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
+            active, aug, tangential = res.aux
+            return res._replace(aux=VelocityAux(active, aug, gdot[:model.n_constraints], tangential))
+        res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
         return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
 
     def linearise(x, res):
@@ -248,6 +263,9 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         floor = constraint_floor(kv, G, v)
         if with_forces:
             floor = floor + roundoff_floor(h, matrix.K_norm, matrix.C_norm, q, v)
+        if law is not None:
+            dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted)
+            return (dW, dLam), floor
         dW, dLam = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kv, pv)
         return (dW, dLam), floor
 

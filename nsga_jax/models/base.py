@@ -173,6 +173,37 @@ class Model(eqx.Module):
         """Newton restitution coefficients e, shape (nu,), each in [0, 1]."""
         return lax.full((self.n_unilateral,), 0.0)  # weakly typed: takes the run's precision
 
+    # ------------------------------------------------------------ friction
+    @property
+    def n_friction(self) -> int:
+        """Number of frictional contacts ``nf`` (unilateral constraints with a
+        Coulomb friction coefficient); 0: every contact is frictionless and no
+        friction row is ever formed."""
+        return 0
+
+    @property
+    def friction_dim(self) -> int:
+        """Tangent directions per frictional contact: 1 in a planar system (a
+        friction segment), 2 in space (a friction disk); 0 without friction."""
+        return 0
+
+    @property
+    def friction_normals(self) -> tuple[int, ...]:
+        """For each frictional contact, the row of its normal gap in the
+        constraint vector ``[g^B; g^U]`` (static, nf entries)."""
+        return ()
+
+    @property
+    def friction_coefficients(self) -> ConstraintVector:
+        """Coulomb coefficients μ >= 0 of the frictional contacts, shape (nf,)."""
+        return lax.full((self.n_friction,), 0.0)
+
+    def tangent_jacobian(self, q: Vector) -> ConstraintMatrix:
+        """g_T: the map from v to the tangential (slip) velocities of the
+        frictional contacts, shape (nf * friction_dim, n), contact by contact
+        (rows ``j * friction_dim + d``: tangent d of contact j) [m/s per unit of v]."""
+        return jnp.zeros((0, self.n_dof), q.dtype)
+
     # ---------------------------------------------------------- monitors
     def energy(self, q: Vector, v: Vector) -> Scalar:
         """Total mechanical energy [J] (kinetic + potential + strain), where the

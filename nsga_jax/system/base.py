@@ -234,11 +234,29 @@ class AbstractJoint(AbstractConstraint):
 
 
 class AbstractContact(AbstractConstraint):
-    """Unilateral constraints g(q) >= 0 with Newton restitution."""
+    """Unilateral constraints g(q) >= 0 with Newton restitution, and Coulomb
+    friction where the contact has a coefficient ``mu`` (a field that is
+    ``None`` on a frictionless contact: the friction rows then do not exist)."""
 
     @abc.abstractmethod
     def restitution(self, bodies: tuple[AbstractBody, ...]) -> Vector:
         """Restitution coefficient of each gap, shape (count,), in [0, 1]."""
+
+    @property
+    def frictional(self) -> bool:
+        """Whether the contact carries Coulomb friction (static: a coefficient was given)."""
+        return getattr(self, "mu", None) is not None
+
+    def friction(self, bodies: tuple[AbstractBody, ...]) -> Vector:
+        """The Coulomb coefficient μ of each gap, shape (count,)."""
+        return jnp.broadcast_to(getattr(self, "mu"), (self.count(bodies),))
+
+    def slip_velocity(self, bodies: tuple[AbstractBody, ...], qs: tuple[Vector, ...],
+                      vs: tuple[Vector, ...]) -> Vector:
+        """Tangential velocity of each contact point, shape (count, dim - 1)
+        [m/s]: the relative velocity of the touching material points on the
+        contact's tangents (linear in the velocities ``vs``)."""
+        raise NotImplementedError(f"{type(self).__name__} has no friction")
 
 
 class AbstractForce(AbstractPart):

@@ -188,6 +188,46 @@ class SystemModel(Model):
         rows = [c.restitution(layout.bodies_of(self, c)) for c in self.contacts]
         return jnp.concatenate(rows) if rows else jnp.zeros((0,))
 
+    # -------------------------------------------------------------- friction
+    @property
+    def n_friction(self) -> int:
+        return sum(c.count(layout.bodies_of(self, c)) for c in self.contacts if c.frictional)
+
+    @property
+    def friction_dim(self) -> int:
+        return self.dim - 1 if self.n_friction else 0
+
+    @property
+    def friction_normals(self) -> tuple[int, ...]:
+        rows: list[int] = []
+        for contact, name in zip(self.contacts, self.contact_names):
+            if contact.frictional:
+                span = self.rows("contacts", name)
+                rows.extend(range(span.start, span.stop))
+        return tuple(rows)
+
+    @property
+    def friction_coefficients(self) -> ConstraintVector:
+        rows = [c.friction(layout.bodies_of(self, c)) for c in self.contacts if c.frictional]
+        return jnp.concatenate(rows) if rows else jnp.zeros((0,))
+
+    def tangent_jacobian(self, q: Vector) -> Matrix:
+        """g_T (nf * friction_dim, n): each frictional contact's part-level
+        ``jax.jacfwd`` of its slip velocity in the velocities of its bodies."""
+        nf, dt = self.n_friction, self.friction_dim
+        frictional = tuple(c for c in self.contacts if c.frictional)
+        G = jnp.zeros((nf, dt, self.n_dof), q.dtype)
+        for group, stacked, bodies, _ in layout.part_groups(self, frictional, first_row=0):
+            def slip(part, bodies, qs, vs):
+                return part.slip_velocity(bodies, qs, vs)
+
+            qs, vs = layout.slot_coordinates(self, group, q, jnp.zeros_like(q))
+            blocks = call(group, jax.jacfwd(slip, argnums=3), stacked, bodies, qs, vs)  # per slot (.., k, dt, kb)
+            for cols, block in zip(group.columns, blocks):
+                for d in range(dt):
+                    G = G.at[:, d].set(scatter_block(G[:, d], group.rows, cols, block[..., d, :]))
+        return G.reshape(nf * dt, self.n_dof)
+
     def constraint_jacobian(self, q: Vector) -> Matrix:
         """g_q (nc, n), assembled from each part's ``jax.jacfwd`` on its own bodies' coordinates."""
         return _jacobian_rows(self, q, bilateral_only=False)

@@ -1,0 +1,163 @@
+"""Coulomb friction in the velocity-level sub-problems: the Alart–Curnier
+augmented Lagrangian and its semi-smooth Newton correction.
+
+A frictional contact j has a normal impulse P_N,j (its row of the velocity
+jump's multipliers, eq. 42) and a tangential impulse P_T,j in the contact's
+tangent space (1 direction in a planar system, 2 in space), with the slip
+velocity γ_T,j = g_T,j(q) v. Coulomb's law at impulse level,
+
+    |P_T,j| <= μ_j P_N,j,   P_T,j = -μ_j P_N,j γ_T,j / |γ_T,j| where γ_T,j ≠ 0,
+
+is written, as Alart and Curnier do, as a projection of the augmented
+tangential multiplier on the disk of radius μ_j P_N,j:
+
+    σ_T = kv Λ_T - pv γ_T,    P_T = proj_{D(μ P_N)}(σ_T),
+    residual row  -(kv/pv) (kv Λ_T - P_T)  = 0,
+
+which is -kv γ_T (stick: the slip velocity vanishes) inside the disk,
+the slip law on its edge, and -(kv²/pv) Λ_T (no impulse) on an open contact
+(P_N = 0). The normal part is the frictionless law of eq. 42 unchanged:
+σ_N = kv Λ_N - pv ġ_N, P_N = σ_N on the active set. The multipliers of a
+velocity sub-problem are then ``[Λ_N (nc); Λ_T (nf · d)]`` and its reaction
+``g_q^T P_N + g_T^T P_T``.
+
+Newton's correction eliminates the coordinates by a Schur complement, as for
+the frictionless bordered systems (:func:`~nsga_jax.integrators.linalg.solve_bordered`),
+but with the law's generalised Jacobian: with y = A^{-1} r₁, B = A^{-1} G^T and
+the Delassus matrix D = G B on all contact rows (normal and tangential),
+
+    [ I - P_γ D    -P_Λ ] [dP]   [ -P_γ G y        ]
+    [ R_γ D         R_Λ ] [dΛ] = [ -r_c + R_γ G y  ],    dW = -y + B dP,
+
+where P_Λ, P_γ (R_Λ, R_γ) are the derivatives of the impulses P (of the
+contact residual rows r_c) in the multipliers and the rates, taken by
+``jax.jacfwd`` of the local law. The system has 2 (nc + nf · d) unknowns;
+what the model has no friction for never reaches this module.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Scalar, Vector
+from ..models.base import Model
+from .linalg import REDUNDANCY_SHIFT, AbstractFactorisation, linear_solve
+from .newton import Residual, convergence_bound
+
+
+def has_friction(model: Model) -> bool:
+    """Whether the model has frictional contacts (static)."""
+    return model.n_friction > 0
+
+
+def multiplier_count(model: Model) -> int:
+    """Unknown multipliers of a velocity-level sub-problem: nc normal ones and,
+    with friction, nf · d tangential ones."""
+    return model.n_constraints + model.n_friction * model.friction_dim
+
+
+def velocity_start(model: Model, q: Vector):
+    """Newton's starting point of a velocity-level sub-problem: W = 0, Λ = 0."""
+    return (jnp.zeros_like(q), jnp.zeros((multiplier_count(model),), q.dtype))
+
+
+def velocity_rows(model: Model, q: Vector, G: jax.Array) -> jax.Array:
+    """The rows whose rates the velocity sub-problem constrains: g_q (nc, n) and,
+    with friction, g_T (nf · d, n) below them."""
+    if not has_friction(model):
+        return G
+    return jnp.concatenate([G, model.tangent_jacobian(q)])
+
+
+def disk_projection(sigma: jax.Array, radius: jax.Array) -> jax.Array:
+    """Projection of each row of ``sigma`` (nf, d) on the disk (segment for
+    d = 1) of radius ``radius`` (nf,) >= 0 about the origin. A zero radius
+    projects on the origin with a zero derivative (a frictionless contact's
+    law); the norm is taken safely at σ = 0."""
+    s2 = jnp.sum(sigma**2, axis=-1)
+    inside = (s2 <= radius**2) & (radius > 0)
+    norm = jnp.sqrt(jnp.where(s2 > 0, s2, 1.0))
+    return jnp.where(inside[:, None], sigma, (radius / norm)[:, None] * sigma)
+
+
+class LawParts(NamedTuple):
+    """The local contact law's output: the impulses P (nc + nf·d) [N s] that
+    act on the coordinates, the contact residual rows r_c, the normal active
+    set (nc,) and the normal augmented multiplier σ_N (nc,)."""
+
+    impulse: jax.Array
+    rows: jax.Array
+    active: jax.Array
+    aug: jax.Array
+
+
+def contact_law(lam: jax.Array, rate: jax.Array, candidates, unilateral, mu: jax.Array,
+                normals: tuple[int, ...], d: int, k: Scalar, p: Scalar) -> LawParts:
+    """The velocity-level law of every contact row at the multipliers ``lam``
+    and rates ``rate`` (both nc + nf·d): eq. 42's normal law and
+    Alart–Curnier's tangential one (module docstring)."""
+    nc = unilateral.shape[0]
+    lam_n, rate_n = lam[:nc], rate[:nc]
+    aug = k * lam_n - p * rate_n
+    active = candidates & (~unilateral | (aug >= 0))
+    P_n = jnp.where(active, aug, 0.0)
+    r_n = jnp.where(active, -k * rate_n, -(k**2 / p) * lam_n)
+    if rate.shape[0] == nc:
+        return LawParts(P_n, r_n, active, aug)
+    lam_t, rate_t = lam[nc:].reshape(-1, d), rate[nc:].reshape(-1, d)
+    P_t = disk_projection(k * lam_t - p * rate_t, mu * P_n[jnp.asarray(normals)])
+    r_t = -(k / p) * (k * lam_t - P_t)
+    return LawParts(jnp.concatenate([P_n, P_t.ravel()]), jnp.concatenate([r_n, r_t.ravel()]), active, aug)
+
+
+class FrictionLaw(NamedTuple):
+    """A velocity-level sub-problem's contact law, bound to the model's
+    friction structure: ``law(lam, rate)`` -> :class:`LawParts`."""
+
+    candidates: jax.Array
+    unilateral: jax.Array
+    mu: jax.Array
+    normals: tuple[int, ...]
+    d: int
+    k: Scalar
+    p: Scalar
+
+    @classmethod
+    def of(cls, model: Model, candidates, unilateral, k: Scalar, p: Scalar, dtype) -> "FrictionLaw":
+        mu = jnp.asarray(model.friction_coefficients, dtype)
+        return cls(jnp.broadcast_to(candidates, unilateral.shape), unilateral, mu, model.friction_normals,
+                   model.friction_dim, k, p)
+
+    def __call__(self, lam: jax.Array, rate: jax.Array) -> LawParts:
+        return contact_law(lam, rate, self.candidates, self.unilateral, self.mu, self.normals, self.d,
+                           self.k, self.p)
+
+    def residual(self, inertia: Vector, force: Vector, G: jax.Array, rate: jax.Array, lam: jax.Array,
+                 tol_r, tol_f) -> Residual:
+        """``[inertia - force - G^T P;  r_c]`` with ``aux = (active, σ_N, P_T)``."""
+        parts = self(lam, rate)
+        reaction = G.T @ parts.impulse
+        r = jnp.concatenate([inertia - force - reaction, parts.rows])
+        nc = self.unilateral.shape[0]
+        return Residual(r, convergence_bound([inertia, force, reaction, parts.rows], tol_r, tol_f),
+                        (parts.active, parts.aug, parts.impulse[nc:]))
+
+    def correction(self, matrix: AbstractFactorisation, r1: Vector, r_c: jax.Array, G_up: jax.Array,
+                   G_low: jax.Array, lam: jax.Array, rate: jax.Array) -> tuple[Vector, jax.Array]:
+        """The semi-smooth Newton correction (dW, dΛ) (module docstring), with
+        the law's derivatives at (lam, rate) and the coordinates eliminated
+        through ``matrix`` (the top-left block A)."""
+        y, B = matrix.solve_with_constraints(r1, G_up)
+        D = G_low @ B
+        m = D.shape[0]
+        (P_lam, P_rate), (R_lam, R_rate) = jax.jacfwd(lambda a, b: self(a, b)[:2], argnums=(0, 1))(lam, rate)
+        eye = jnp.eye(m, dtype=D.dtype)
+        D = D + REDUNDANCY_SHIFT * jnp.max(jnp.abs(jnp.diagonal(D))) * eye  # redundant contacts: see linalg
+        Gy = G_low @ y
+        system = jnp.block([[eye - P_rate @ D, -P_lam], [R_rate @ D, R_lam]])
+        rhs = jnp.concatenate([-P_rate @ Gy, -r_c + R_rate @ Gy])
+        sol = linear_solve(system, rhs)
+        return -y + B @ sol[:m], sol[m:]
