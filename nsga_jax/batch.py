@@ -72,14 +72,21 @@ def stack_models(models: Sequence[Model]) -> Model:
     """
     parts = [eqx.partition(m, eqx.is_array) for m in models]
     static = parts[0][1]
-    for i, (_, s) in enumerate(parts[1:], start=1):
-        # jaxlib declares no type for its compiled PyTreeDef, so mypy cannot see that it compares
-        if (jax.tree_util.tree_structure(s) != jax.tree_util.tree_structure(static)  # type: ignore[operator]
-                or not eqx.tree_equal(s, static)):
+    for i, m in enumerate(models[1:], start=1):
+        if not same_structure(m, models[0]):
             raise ConfigError(f"batch member {i} differs in structure from member 0 (sizes, element kinds "
                               "or other static fields); run such members in separate batches")
     dynamic = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *[d for d, _ in parts])
     return eqx.combine(dynamic, static)
+
+
+def same_structure(a: Model, b: Model) -> bool:
+    """Whether two models can share one compilation: the same tree and the
+    same static fields (their arrays may differ in value)."""
+    sa, sb = eqx.partition(a, eqx.is_array)[1], eqx.partition(b, eqx.is_array)[1]
+    # jaxlib declares no type for its compiled PyTreeDef, so mypy cannot see that it compares
+    return bool(jax.tree_util.tree_structure(sa) == jax.tree_util.tree_structure(sb)  # type: ignore[operator]
+                and eqx.tree_equal(sa, sb))
 
 
 def broadcast_members(tree, n: int):

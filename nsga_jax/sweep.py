@@ -33,7 +33,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from .batch import BatchRun, member_mesh, member_solution, stack_models
+from .batch import BatchRun, member_mesh, member_solution, same_structure, stack_models
 from .distributed import agree
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
 from .metrics import relative_l1_error
@@ -90,6 +90,20 @@ class SweepResult:
 
 
 # -------------------------------------------------------------------- runs
+
+
+def split_batches(mems: list[Member], batch_size: int) -> list[list[Member]]:
+    """The members in batches of at most ``batch_size``, in grid order, a new
+    batch wherever a member's model differs in structure from the one before
+    (a contact with friction and one without, an element count): each batch
+    is one compilation."""
+    runs: list[list[Member]] = []
+    for m in mems:
+        if runs and same_structure(m.scene.model, runs[-1][-1].scene.model):
+            runs[-1].append(m)
+        else:
+            runs.append([m])
+    return [run[i:i + batch_size] for run in runs for i in range(0, len(run), batch_size)]
 
 
 def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tuple[list[dict], float, float]:
@@ -208,7 +222,8 @@ def sweep(
         raise ConfigError(f"batch_size must be an integer >= 1, got {batch_size!r}")
     batch_size = min(int(batch_size), len(mems))
     padded = -(-batch_size // n_dev) * n_dev
-    n_batches = -(-len(mems) // batch_size)
+    batches = split_batches(mems, batch_size)
+    n_batches = len(batches)
 
     out_dir = None if out is None else Path(out)
     if out_dir is not None:
@@ -216,7 +231,7 @@ def sweep(
     result = SweepResult(rows=[], swept=swept)
     t_start = time.perf_counter()
     for k in range(n_batches):
-        batch = mems[k * batch_size:(k + 1) * batch_size]
+        batch = batches[k]
         path = None if out_dir is None else out_dir / "batches" / f"batch_{k:05d}.csv"
         if agree(path is not None and path.exists()):  # process 0 decides: every process skips or runs it
             assert path is not None  # every process gives the same out

@@ -163,8 +163,16 @@ def _systems(ns):
     assert model.constant_mass and not model.linear_constraints
 
 
+def _friction(ns):
+    sol = ns["sol"]
+    assert sol.stats["failed_steps"] == 0
+    assert float(sol.q[-1, 0]) == pytest.approx(2.0**2 / (2 * 0.3 * 9.81), abs=2e-3)  # DS: O(h v0)
+    assert abs(float(sol.v[-1, 0])) < 1e-12  # stopped, and at rest
+
+
 CHECKS = {
     ("docs/systems.md", "## A first system"): _systems,
+    ("docs/friction.md", "# Coulomb friction"): _friction,
     ("docs/newtons-cradle.md", "## In Python"): _newtons_cradle,
     ("docs/double-pendulum.md", "## In Python"): _double_pendulum,
     ("docs/system-files.md", "## From Python"): _system_files,

@@ -43,7 +43,8 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
     ``constant_mass``, ``linear_force`` (K and C the same at every state),
     ``velocity_dependent_force=False`` (no ∂f/∂v), ``linear_constraints``
     (the same g_q at every state) and a declared ``bandwidth`` (M and K zero
-    outside the band).
+    outside the band), and with friction its structure (normal rows,
+    coefficients, the tangent Jacobian's shape).
 
     Args:
         q, v: the state to sample around, shape (n,) (default zeros).
@@ -118,6 +119,9 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
             fail("linear_constraints", f"declared True, but the constraint Jacobian g_q changes with q (by "
                                        f"{change:.2e}, relative)")
         checked.append("linear_constraints")
+    if model.n_friction:
+        _check_friction(model, states[0][0], fail)
+        checked.append("friction")
     b = model.bandwidth
     if b is not None:
         outside = np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > b
@@ -127,6 +131,23 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
                 fail("bandwidth", f"declared {b}, but {name} has entries up to {worst:.3g} outside that band")
         checked.append("bandwidth")
     return checked
+
+
+def _check_friction(model: Model, q, fail) -> None:
+    """The friction structure: nf normal rows, each a distinct unilateral row,
+    nf coefficients >= 0, a tangent Jacobian of nf · d rows, d = 1 or 2."""
+    nf, d, nb, nc = model.n_friction, model.friction_dim, model.n_bilateral, model.n_constraints
+    normals = model.friction_normals
+    if d not in (1, 2):
+        fail("friction_dim", f"must be 1 (planar) or 2 (spatial) with frictional contacts, got {d}")
+    if len(normals) != nf or len(set(normals)) != nf or not all(nb <= j < nc for j in normals):
+        fail("friction_normals", f"must be {nf} distinct unilateral rows (in [{nb}, {nc})), got {normals}")
+    mu = np.asarray(model.friction_coefficients)
+    if mu.shape != (nf,) or not np.all(mu >= 0):
+        fail("friction_coefficients", f"must be {nf} values >= 0, got {mu.tolist()}")
+    shape = tuple(model.tangent_jacobian(q).shape)
+    if shape != (nf * d, model.n_dof):
+        fail("tangent_jacobian", f"has shape {shape}, where the declared sizes say {(nf * d, model.n_dof)}")
 
 
 __all__ = ["check_model"]

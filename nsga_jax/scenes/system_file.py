@@ -120,7 +120,8 @@ def spec_from_file(path: str | Path) -> SceneSpec:
     positions = tuple(k for k, u in units.items() if u in ("m", "rad") and not k.endswith((".gap", ".violation")))
     gaps = tuple(k for k in units if k.endswith(".gap"))
     energy = ("energy",) if "energy" in units else ()
-    plotted = (gaps[:3] + energy)
+    slips = tuple(k for k in units if k.endswith(".slip"))
+    plotted = (gaps[:3] + slips[:2] + energy)
     plotted = positions[:9 - len(plotted)] + plotted  # at most 9 panels
     return SceneSpec(name=name, description=description, parameters=parsed.parameters, solver_defaults=solver,
                      make=make, check=check, observables=names, error_observables=positions, units=units,

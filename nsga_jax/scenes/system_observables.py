@@ -1,5 +1,6 @@
 """The observables of a system scene: each body's reference point and
-velocity, each contact's gap and force, each joint's violation, the energy."""
+velocity, each contact's gap and force (and, with friction, its friction
+force and largest slip speed), each joint's violation, the energy."""
 
 from __future__ import annotations
 
@@ -17,8 +18,10 @@ def observable_units(description: SystemDescription) -> dict[str, str]:
     """The scene's observables and their units: per body the position of its
     reference point (a rigid body's origin, a flexible body's tip node
     ``tip_x``...) and its velocity, its angle and angular velocity where it
-    has one; per contact its smallest gap and its force; per joint its
-    violation; ``energy`` where every force is conservative."""
+    has one; per contact its smallest gap and its force, and with a
+    friction coefficient ``mu`` the magnitude of its total friction force
+    and the largest slip speed of its points; per joint its violation;
+    ``energy`` where every force is conservative."""
     axes = "xyz"[:description.dim]
     out: dict[str, str] = {}
     for entry in description.parts:
@@ -33,6 +36,8 @@ def observable_units(description: SystemDescription) -> dict[str, str]:
     for entry in description.parts:
         if entry.kind == "contacts":
             out[f"{entry.name}.gap"], out[f"{entry.name}.force"] = "m", "N"
+            if "mu" in entry.arrays:
+                out[f"{entry.name}.friction"], out[f"{entry.name}.slip"] = "N", "m/s"
     for entry in description.parts:
         if entry.kind == "joints":
             out[f"{entry.name}.violation"] = "m"
@@ -72,6 +77,7 @@ def observables_of(model, names: tuple[str, ...]) -> Callable:
                 rows = model.rows("contacts", name)
                 out[f"{name}.gap"] = jnp.min(gaps[:, rows.start - nb:rows.stop - nb], axis=1)
                 out[f"{name}.force"] = jnp.sum(sol.impulse[:, rows], axis=1) / sol.h
+            out.update(_friction_observables(model, sol))
         if model.joint_names:
             g = jax.vmap(model.bilateral)(q)
             for name in model.joint_names:
@@ -81,6 +87,30 @@ def observables_of(model, names: tuple[str, ...]) -> Callable:
         return {k: out[k] for k in names}
 
     return observables
+
+
+def _friction_observables(model, sol) -> dict:
+    """Per frictional contact: ``.friction``, the magnitude of the sum of its
+    points' tangential impulses over h [N], and ``.slip``, the largest slip
+    speed |g_T v| of its points [m/s] (at the end of each step)."""
+    import jax
+    import jax.numpy as jnp
+
+    if not model.n_friction:
+        return {}
+    d = model.friction_dim
+    slip = jax.vmap(lambda q, v: model.tangent_jacobian(q) @ v)(sol.q, sol.v).reshape(len(sol.q), -1, d)
+    impulse = sol.records.friction.reshape(len(sol.q), -1, d)
+    out, start = {}, 0
+    for contact, name in zip(model.contacts, model.contact_names):
+        if not contact.frictional:
+            continue
+        span = model.rows("contacts", name)
+        stop = start + span.stop - span.start
+        out[f"{name}.friction"] = jnp.linalg.norm(jnp.sum(impulse[:, start:stop], axis=1), axis=-1) / sol.h
+        out[f"{name}.slip"] = jnp.max(jnp.linalg.norm(slip[:, start:stop], axis=-1), axis=1)
+        start = stop
+    return out
 
 
 __all__ = ["observable_units", "observables_of"]
