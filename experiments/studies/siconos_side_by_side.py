@@ -255,7 +255,9 @@ def main() -> None:
                       + "  ".join(f"{k} {v:.1e}" for k, v in agreement[-1].items() if k in observed), flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "siconos.csv", rows)
-    write_csv(args.out / "siconos_mj_agreement.csv", agreement)
+    write_csv(args.out / "siconos_mj_agreement.csv",
+              [{"problem": a["problem"], "h": a["h"], "quantity": k, "max_relative_difference": v}
+               for a in agreement for k, v in a.items() if k not in ("problem", "h")])
     lines = []
     for name in args.cases:
         mine = [r for r in rows if r["problem"] == name]
