@@ -19,6 +19,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar
 from ..models.base import Model
+from .friction import velocity_rows
 from .iteration_matrix import (
     AbstractIterationMatrix,
     ConstantInverse,
@@ -124,7 +125,8 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
     :func:`matrix_kinds`) say are constant, from their ``top_lefts``
     (smooth, position, velocity; ``None`` for a sub-problem the scheme does
     not have). The smooth block couples only to the bilateral rows of g_q,
-    the others to all rows. ``enabled=False``: :func:`generic_operators`.
+    the others to all rows, and the velocity one, with friction, to the
+    tangential rows g_T too. ``enabled=False``: :func:`generic_operators`.
     """
     if not enabled:
         return generic_operators()
@@ -153,14 +155,18 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
     if model.linear_constraints and nc > 0:
         constraints = ConstantJacobian(model.constraint_jacobian(zeros), nb)
 
-    def build(kind: type[AbstractIterationMatrix], top_left: TopLeft | None, rows: int) -> AbstractIterationMatrix:
+    def build(kind: type[AbstractIterationMatrix], top_left: TopLeft | None, rows: int,
+              tangential: bool = False) -> AbstractIterationMatrix:
         if not issubclass(kind, (ConstantInverse, ConstantTridiagonal)):
             return kind()
         assert top_left is not None and M is not None and K is not None and C is not None  # matrix_kinds: linear
         G = constraints.G[:rows] if (isinstance(constraints, ConstantJacobian) and rows) else None
+        if G is not None and tangential:  # the velocity sub-problems' rows: g_q and, with friction, g_T
+            G = velocity_rows(model, zeros, G)
         return kind.of(top_left(M, K, C), G, K_norm, C_norm)
 
-    smooth, position, velocity = (build(kind, top_left, rows)
-                                  for kind, top_left, rows in zip(kinds, top_lefts, (nb, nc, nc)))
+    smooth, position, velocity = (build(kind, top_left, rows, tangential)
+                                  for kind, top_left, rows, tangential
+                                  in zip(kinds, top_lefts, (nb, nc, nc), (False, False, True)))
     return Operators(mass=mass, force=force, constraints=constraints,
                      smooth=smooth, position=position, velocity=velocity)
