@@ -120,7 +120,7 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
                                        f"{change:.2e}, relative)")
         checked.append("linear_constraints")
     if model.n_friction:
-        _check_friction(model, states[0][0], fail)
+        _check_friction(model, [qs for qs, _ in states], fail)
         checked.append("friction")
     b = model.bandwidth
     if b is not None:
@@ -133,9 +133,12 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
     return checked
 
 
-def _check_friction(model: Model, q, fail) -> None:
+def _check_friction(model: Model, qs, fail) -> None:
     """The friction structure: nf normal rows, each a distinct unilateral row,
-    nf coefficients >= 0, a tangent Jacobian of nf · d rows, d = 1 or 2."""
+    nf coefficients >= 0, a tangent Jacobian of nf · d rows, d = 1 or 2,
+    the same at every state where the constraints are declared affine (a
+    constant velocity iteration matrix holds its product with g_T)."""
+    q = qs[0]
     nf, d, nb, nc = model.n_friction, model.friction_dim, model.n_bilateral, model.n_constraints
     normals = model.friction_normals
     if d not in (1, 2):
@@ -148,6 +151,12 @@ def _check_friction(model: Model, q, fail) -> None:
     shape = tuple(model.tangent_jacobian(q).shape)
     if shape != (nf * d, model.n_dof):
         fail("tangent_jacobian", f"has shape {shape}, where the declared sizes say {(nf * d, model.n_dof)}")
+    if model.linear_constraints:
+        tangents = [model.tangent_jacobian(x) for x in qs]
+        change = max(_differ(T, tangents[0]) for T in tangents[1:])
+        if change > RELATIVE:
+            fail("linear_constraints", f"declared True, but the tangent Jacobian g_T changes with q (by "
+                                       f"{change:.2e}, relative)")
 
 
 __all__ = ["check_model"]
