@@ -26,13 +26,12 @@ from .base import (
     StepState,
 )
 from .ds import DS, AbstractGenAlpha
-from .friction import velocity_start
+from .friction import projection_start
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, PositionAux, StepOutput, SubproblemRecord, VelocityAux, make_output
 from .residuals import DIVERGENCE_FACTOR
 from .subproblems import (
     position_problem,
-    projection_start,
     smooth_motion,
     smooth_problem,
     smooth_start,
@@ -92,7 +91,7 @@ class CS(AbstractGenAlpha):
             return smooth_motion(co, h, q_pred, v_pred, xs, jnp.zeros((model.n_bilateral,), q_pred.dtype))
 
         def position_res(xs):
-            return position_problem(model, ops, tol, t, h, as_smooth(xs), None, with_forces=False)
+            return position_problem(model, ops, tol, t, h, as_smooth(xs), None, False, state.q)
 
         def velocity_res(xs, xp, candidates):
             return velocity_problem(model, ops, tol, t, h, as_smooth(xs), xp[0], candidates, None, G_prev_v_prev,
@@ -109,7 +108,7 @@ class CS(AbstractGenAlpha):
             return jnp.stack([r.bound for r in rs])
 
         x0 = (smooth_start(v_pred, model.n_bilateral), projection_start(model, q_pred),
-              velocity_start(model, q_pred))
+              projection_start(model, q_pred))
         r0 = residuals(*x0)
         n0 = norms(r0)
 

@@ -36,7 +36,7 @@ from .base import (
     StepState,
 )
 from .coefficients import GenAlphaCoefficients
-from .friction import velocity_start
+from .friction import projection_start
 from .iteration_matrix import Held
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
@@ -53,7 +53,6 @@ from .records import (
 )
 from .subproblems import (
     position_problem,
-    projection_start,
     smooth_motion,
     smooth_problem,
     smooth_start,
@@ -176,7 +175,7 @@ class DS(AbstractGenAlpha):
 
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
-        sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces),
+        sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces, state.q),
                       projection_start(model, qt), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
@@ -184,7 +183,7 @@ class DS(AbstractGenAlpha):
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
         sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth,
                                          G_prev_v_prev, self.nonsmooth_forces),
-                      velocity_start(model, qt), self.max_iter, held[2], name="velocity_jump")
+                      projection_start(model, qt), self.max_iter, held[2], name="velocity_jump")
         W, _ = sol_v.x
         velocity: VelocityAux = sol_v.aux
 

@@ -59,8 +59,10 @@ def multiplier_count(model: Model) -> int:
     return model.n_constraints + model.n_friction * model.friction_dim
 
 
-def velocity_start(model: Model, q: Vector):
-    """Newton's starting point of a velocity-level sub-problem: W = 0, Λ = 0."""
+def projection_start(model: Model, q: Vector):
+    """Newton's starting point of the position correction and of a
+    velocity-level sub-problem: U = 0, ν = 0 (or W = 0, Λ = 0), the
+    multipliers with their tangential part where the model has friction."""
     return (jnp.zeros_like(q), jnp.zeros((multiplier_count(model),), q.dtype))
 
 

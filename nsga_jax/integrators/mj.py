@@ -29,7 +29,7 @@ from .base import (
     AbstractScheme,
     StepState,
 )
-from .friction import FrictionLaw, has_friction, velocity_rows, velocity_start
+from .friction import FrictionLaw, has_friction, projection_start, velocity_rows
 from .linalg import solve_bordered
 from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve
@@ -85,8 +85,7 @@ class MJ(AbstractScheme):
             candidates = ~is_unilateral(model) | closing
             restituted = restitution(model, q_n.dtype) * (ops.constraints.jacobian(model, q_n) @ v_n)
         args = (model, ops, tol, t, h, self.theta, q_n, v_n, f_n, candidates, restituted)
-        x0 = velocity_start(model, v_n)
-        x0 = (v_n, x0[1])
+        x0 = (v_n, projection_start(model, v_n)[1])
         sol = solve(moreau_jean_problem, args, x0, self.max_iter, name="moreau_jean")
         v, _ = sol.x
         q = q_n + h * (self.theta * v + (1.0 - self.theta) * v_n)

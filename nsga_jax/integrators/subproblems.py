@@ -17,8 +17,8 @@ makes it constant and a fresh LU factorisation otherwise
 - :func:`velocity_problem` (eqs. 40-43, matrix 49): x = (W, Λ), v = ṽ + W,
   active set B ⊆ A from σ = kv Λ - pv ġ, with or without the h f* term (8);
   with frictional contacts Λ also holds the tangential impulses
-  (:mod:`~nsga_jax.integrators.friction`). The position correction stays
-  frictionless: ν is a projection multiplier, not an impulse.
+  (:mod:`~nsga_jax.integrators.friction`); the position correction then
+  carries the same law on the contact points' slip over the step.
 
 DS runs them once each in sequence; DSn drops the f^p and f* terms (eqs.
 31a-b); CS evaluates the smooth problem at the total motion (q̃ + U, ṽ + W)
@@ -130,14 +130,24 @@ def smooth_motion(co: GenAlphaCoefficients, h: Scalar, q_pred: Vector, v_pred: V
 
 
 def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth,
-                     f_smooth: ForceAt | None, with_forces: bool):
+                     f_smooth: ForceAt | None, with_forces: bool, q_prev: Vector | None = None):
     """Step 2: residual [M(q̃) U - h² f^p - g_q^{A T} ξ^A;  -kp g^A;  -(kp²/pp) ν^{Ā}]
     with ξ = kp ν - pp g(q), A = bilaterals ∪ {ξ_j >= 0}; ``aux = (A, ξ, g, g_q)``.
-    ``f_smooth``: the force at the smooth motion; ``with_forces=False`` drops h² f^p (eq. 31b)."""
+    ``f_smooth``: the force at the smooth motion; ``with_forces=False`` drops h² f^p (eq. 31b).
+
+    With frictional contacts, the correction also carries Coulomb's law at
+    position level (:mod:`~nsga_jax.integrators.friction`): the tangential
+    multipliers ν_T act along g_T(q̃) on the slip of the contact points over
+    the step, Δ_T = g_T(q̃) (q̃ + U - q_n) (``q_prev`` is q_n), within the disk
+    of radius μ times the normal correction ξ_N: a sticking point does not
+    move over the step, a sliding one is held back by μ ξ_N."""
     tol_r, tol_f, _ = tol
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
+    law = FrictionLaw.of(model, True, unilateral, kp, pp, smooth.q.dtype) if has_friction(model) else None
+    GT = model.tangent_jacobian(smooth.q) if law is not None else None
+    assert law is None or q_prev is not None, "friction at position level needs the state q_n"
     curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
     GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
@@ -154,8 +164,15 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         G = ops.constraints.jacobian(model, q)
         inertia = ops.mass.product(model, smooth.q, U)
         force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
+        if law is not None:
+            res = law.residual(inertia, force, jnp.concatenate([G, GT]), slip_rows(g, q), nu, tol_r, tol_f)
+            return res._replace(aux=PositionAux(res.aux[0], res.aux[1], gap=g, jacobian=G))
         res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
         return res._replace(aux=PositionAux(*res.aux, gap=g, jacobian=G))
+
+    def slip_rows(g, q):
+        """The gaps g(q) and, below them, the contact points' slip over the step Δ_T."""
+        return jnp.concatenate([g, GT @ (q - q_prev)])
 
     def linearise(x, res):
         def matrix():  # eq. 48's top-left block, S_t^p: -d(g_q^{A T} ξ^A)/dq - h² df^p/dq
@@ -181,15 +198,15 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         floor = constraint_floor(kp, G, q)
         if with_forces:
             floor = floor + roundoff_floor(h**2, matrix.K_norm, matrix.C_norm, q, smooth.v)
+        if law is not None:
+            floor = floor + constraint_floor(kp, GT, q - q_prev)
+            G_all = jnp.concatenate([G, GT])
+            dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q))
+            return (dU, dnu), floor
         dU, dnu = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kp, pp)
         return (dU, dnu), floor
 
     return Problem(residual, linearise, correct)
-
-
-def projection_start(model: Model, q: Vector):
-    """Newton's starting point of steps 2 and 3: U = 0, ν = 0 (or W = 0, Λ = 0)."""
-    return (jnp.zeros_like(q), jnp.zeros((model.n_constraints,), q.dtype))
 
 
 def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,
