@@ -180,8 +180,12 @@ def _absmax(x) -> float:
     return float(np.abs(x).max()) if x.size else 0.0
 
 
-def invariant_warnings(totals: RunTotals, tol: Tolerances, h: float, t0: float = 0.0) -> list[str]:
-    """A named warning for each monitor past its tolerance."""
+def invariant_warnings(totals: RunTotals, tol: Tolerances, h: float, t0: float = 0.0,
+                       friction_with_restitution: bool = False) -> list[str]:
+    """A named warning for each monitor past its tolerance.
+    ``friction_with_restitution``: the model has frictional contacts with
+    e > 0, where the energy can rise at an impact for a reason other than
+    the step (the warning then names it)."""
     out = []
     if totals.min_gap < -tol.penetration:
         out.append(f"penetration: a gap reached {totals.min_gap:.3e} m (tolerance {tol.penetration:g} m)")
@@ -199,7 +203,10 @@ def invariant_warnings(totals: RunTotals, tol: Tolerances, h: float, t0: float =
             out.append(f"{ENERGY_WARNING}: the energy rose by {rise:.4g} J ({100 * rise / scale:.3g} % of "
                        f"{scale:.4g} J) in step {step} (t = {t0 + step * h:.6g} s), where a contact impulse "
                        f"acted; the step is too coarse for the motion there (tolerance "
-                       f"{100 * tol.impact_energy:g} %)")
+                       f"{100 * tol.impact_energy:g} %)"
+                       + ("; or: with friction, Newton's restitution (e > 0) can create energy at an impact "
+                          "that reverses a slip (Kane's paradox), see docs/friction.md"
+                          if friction_with_restitution else ""))
     return out
 
 
