@@ -23,6 +23,7 @@ D_EXACT, T_EXACT = V0**2 / (2 * MU * G), V0 / (MU * G)  # sliding distance [m] a
 SCHEMES = {"DS": nsga_jax.DS(), "DSn": nsga_jax.DSn(), "CS": nsga_jax.CS(), "MJ": nsga_jax.MJ()}
 ALL = pytest.mark.parametrize("scheme", list(SCHEMES))
 CHEAP = pytest.mark.parametrize("scheme", ["DS", "MJ"])
+# Tests of 20 s or more on a 2-core machine carry pytest.mark.slow (run by `pytest -m slow`).
 
 
 def run(model, scheme, t_end, h, **kwargs):
@@ -40,14 +41,15 @@ def assert_energy_never_grows(model, sol, rtol=1e-12):
     assert float(np.diff(energy).max()) <= rtol * scale * 10, float(np.diff(energy).max())
 
 
-def box_2d(v0=V0, mu=MU, angle=0.0):
+def box_2d(v0=V0, mu=MU, angle=0.0, sink=0.0):
     """A 0.2 m x 0.1 m box of 1 kg resting on its long face on the floor through
     the origin with normal (-sin a, cos a), launched at v0 [m/s] along it
-    (coordinates x, y, angle)."""
+    (coordinates x, y, angle); ``sink`` [m] presses it into the floor."""
     n = jnp.stack([-jnp.sin(angle), jnp.cos(angle)])
     t = jnp.stack([jnp.cos(angle), jnp.sin(angle)])
     s = System(dim=2)
-    s.add_body("box", RigidBody2D(1.0, (0.2**2 + 0.1**2) / 12, position=0.05 * n, angle=angle, velocity=v0 * t))
+    s.add_body("box", RigidBody2D(1.0, (0.2**2 + 0.1**2) / 12, position=(0.05 - sink) * n, angle=angle,
+                                  velocity=v0 * t))
     s.add_contact("floor", PlaneContact("box", normal=n, origin=[0.0, 0.0], e=0.0,
                                         points=[[-0.1, -0.05], [0.1, -0.05]], mu=mu))
     s.add_force("g", Gravity([0.0, -G]))
@@ -114,12 +116,17 @@ def test_2d_box_slides_stops_and_rests(scheme):
         assert errors[0] > 0 and 1.9 < errors[0] / errors[1] < 2.1 and 1.9 < errors[1] / errors[2] < 2.1, errors
 
 
+MJ_FAILS_AT_REST = [pytest.mark.slow, pytest.mark.xfail(strict=True, reason=(
+    "MJ's Newton iteration fails at rest on the four vertices: the first step after the stop (t = 0.682 s "
+    "at h = 2 ms) and every other step after it, also with max_iter = 200"))]
+
+
 @pytest.mark.parametrize("direction", ["x", "diagonal"])
-@pytest.mark.parametrize("scheme", ["DS", "DSn", "CS"])
+@pytest.mark.parametrize("scheme", [pytest.param("DS", marks=pytest.mark.slow), "DSn", "CS",
+                                    pytest.param("MJ", marks=MJ_FAILS_AT_REST)])
 def test_3d_box_slides_stops_and_rests(scheme, direction):
     """On the friction disk: a launch along x or along the diagonal keeps its
-    direction and stops after v0²/(2 mu g). (MJ is left out: its Newton
-    iteration fails at rest on the four vertices, see the module's report.)"""
+    direction and stops after v0²/(2 mu g), first order in h."""
     u = np.array([1.0, 0.0]) if direction == "x" else np.array([1.0, 1.0]) / np.sqrt(2)
     model = box_3d([V0 * u[0], V0 * u[1], 0.0])
     errors = []
@@ -133,19 +140,21 @@ DS_CREEPS = pytest.mark.xfail(strict=True, reason=(
     "DS's position update carries the smooth acceleration without friction: at rest on the incline the "
     "velocity stays 0 but the position creeps downhill at (h/2) g sin a (1.2e-3 m/s at h = 1 ms, a = 0.25)"))
 MJ_FIRST_STEP = pytest.mark.xfail(strict=True, reason=(
-    "MJ's first step on the tilted floor presses on one corner only (the other one's gap is a round-off "
-    "above zero): the block rocks, penetrates by 1.7e-5 m and moves 1.6e-5 m before it settles"))
-INCLINE = [pytest.param("DS", 0.25, 0.3, marks=DS_CREEPS), pytest.param("DS", 0.29, 0.3, marks=DS_CREEPS),
-           ("DS", 0.35, 0.3), ("DS", 0.5, 0.3),
-           *(pytest.param("MJ", a, 0.3, marks=MJ_FIRST_STEP) for a in (0.25, 0.29, 0.35, 0.5))]
+    "MJ's first step on the tilted floor finds the corners open (gaps a round-off above zero): at a = 0.35 "
+    "the block falls freely for a step, at a = 0.25 it presses on one corner only, rocks, penetrates by "
+    "1.7e-5 m and moves 1.6e-5 m before it settles; pressed in by 1e-12 m it starts as it should"))
+INCLINE = [pytest.param("DS", 0.25, 0.3, 0.0, marks=DS_CREEPS), pytest.param("DS", 0.29, 0.3, 0.0, marks=DS_CREEPS),
+           ("DS", 0.35, 0.3, 0.0), ("DS", 0.5, 0.3, 0.0),
+           *(pytest.param("MJ", a, 0.3, 0.0, marks=MJ_FIRST_STEP) for a in (0.25, 0.35)),
+           *(("MJ", a, 0.3, 1e-12) for a in (0.25, 0.29, 0.35, 0.5))]
 
 
-@pytest.mark.parametrize("scheme, angle, mu", INCLINE)
-def test_block_on_an_incline(scheme, angle, mu):
+@pytest.mark.parametrize("scheme, angle, mu, sink", INCLINE)
+def test_block_on_an_incline(scheme, angle, mu, sink):
     """tan a <= mu: the block stays where it is put (no creep over 2 s);
     otherwise it slides down at g (sin a - mu cos a) from rest. The cases
     that fail (DS at rest, MJ's first step) are reported in their marks."""
-    model = box_2d(v0=0.0, mu=mu, angle=angle)
+    model = box_2d(v0=0.0, mu=mu, angle=angle, sink=sink)
     h = 1e-3
     tangent = np.array([np.cos(angle), np.sin(angle)])
     if np.tan(angle) <= mu:
@@ -163,7 +172,7 @@ def test_block_on_an_incline(scheme, angle, mu):
     assert_energy_never_grows(model, sol)
 
 
-@ALL
+@pytest.mark.parametrize("scheme", [*(pytest.param(k, marks=pytest.mark.slow) for k in ("DS", "DSn", "CS")), "MJ"])
 def test_zero_mu_reproduces_frictionless_contacts(scheme):
     """The paper's spinning rigid box (§4.1) with mu = 0 given as a traced zero
     (friction rows present, every tangential impulse zero) follows the
