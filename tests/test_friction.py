@@ -312,16 +312,19 @@ def test_gradient_of_the_sliding_distance(adjoint):
     switch: the discrete run slides for a whole number N of steps, and x is a
     smooth function of (mu, v0) for each N; the gradient is that piece's
     derivative. d(x)/d(v0) is exactly the sliding time on the grid, N h
-    (0.680 s against T = 0.6796 s); when T crosses a step time, N jumps by
-    one and the piece changes, a jump of O(h) in the derivative that the
-    gradient (as finite differences with a small step) does not see.
-    Both adjoints give the same gradient here (no contact closes: the box
-    rests on the floor from the start)."""
+    (0.680 s against T = 0.6796 s; MJ's is (N - 1/2) h). Where T crosses a
+    step time (v0* = 680 h mu g here) N grows by one: x stays continuous
+    (no jump in the value, so no jump term is missing) but its derivative
+    jumps by h, from 0.680 to 0.681: x(v0) is piecewise smooth with kinks
+    h mu g apart in v0, and the gradient is a staircase within h of the
+    exact v0/(mu g). Both adjoints give the same gradient here (no contact
+    closes: the box rests on the floor from the start)."""
     scheme = nsga_jax.DS(tol_r=1e-12, tol_f=1e-12)
     h, n = 1e-3, 1000
     p = jnp.array([MU, V0])
     value = jax.jit(lambda p: final_x(p, h, n, scheme, adjoint))
-    grad = np.asarray(jax.jit(jax.grad(lambda p: final_x(p, h, n, scheme, adjoint)))(p))
+    grad_fn = jax.jit(jax.grad(lambda p: final_x(p, h, n, scheme, adjoint)))
+    grad = np.asarray(grad_fn(p))
     fd = np.array([(float(value(p.at[k].mul(1 + 1e-6))) - float(value(p.at[k].mul(1 - 1e-6)))) / (2e-6 * float(p[k]))
                    for k in range(2)])
     np.testing.assert_allclose(grad, fd, rtol=1e-6)
@@ -330,3 +333,8 @@ def test_gradient_of_the_sliding_distance(adjoint):
     assert abs(grad[1] - V0 / (MU * G)) <= h
     # -v0²/(2 mu² g) = -g T²/2: a sliding time off by at most h moves it by at most g T h
     assert abs(grad[0] + V0**2 / (2 * MU**2 * G)) <= G * T_EXACT * h
+    # across the switch at v0* (T = 0.680 s on a step time): continuous value, derivative up by h
+    v_star, delta = 680 * h * MU * G, 1e-7
+    below, above = jnp.array([MU, v_star - delta]), jnp.array([MU, v_star + delta])
+    np.testing.assert_allclose([float(grad_fn(below)[1]), float(grad_fn(above)[1])], [0.680, 0.681], rtol=1e-9)
+    assert abs(float(value(above)) - float(value(below))) <= 2 * delta * 0.681 + 1e-12

@@ -22,12 +22,17 @@ Gradient table: d(d)/d(mu) = -v0²/(2 mu² g) and d(d)/d(v0) = v0/(mu g)
 against the gradient nsga_jax.integrate returns (DiscreteAdjoint and
 ImpactTimeAdjoint) and central finite differences of the same discrete run.
 
-Writes docs/results/friction/{convergence,gradients}.{csv,md}.
+At the stick-slip switch (v0 such that T is a step time) the switch table
+gives the distance and its gradient on both sides.
+
+Writes docs/results/friction/{convergence,gradients,switch}.{csv,md};
+``python experiments/studies/friction_convergence.py switch`` runs one part.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -157,6 +162,26 @@ def gradients(n=1600, grad_steps=(2e-3, 1e-3, 5e-4)) -> list[dict]:
     return rows
 
 
+def switch(h=1e-3, n=1600, k=680, delta=1e-7) -> list[dict]:
+    """The stick–slip switch: v0* = k h mu g puts T = v0/(mu g) on the step
+    time k h. On either side of v0* the run slides a different number of
+    steps; the table gives d and its gradient in v0 at v0* ± delta, and the
+    finite difference across the switch."""
+    rows = []
+    tol = dict(tol_r=1e-12, tol_f=1e-12)
+    v_star = k * h * MU * G
+    for name, scheme in (("DS", nsga_jax.DS(**tol)), ("MJ", nsga_jax.MJ(**tol))):
+        value = jax.jit(lambda p: final_x(p, h, scheme, nsga_jax.DiscreteAdjoint(), n))
+        grad = jax.jit(jax.grad(lambda p: final_x(p, h, scheme, nsga_jax.DiscreteAdjoint(), n)))
+        below, above = jnp.array([MU, v_star - delta]), jnp.array([MU, v_star + delta])
+        d_below, d_above = float(value(below)), float(value(above))
+        rows.append({"scheme": name, "h": h, "v0*": v_star, "d(v0*-delta)": d_below, "d(v0*+delta)": d_above,
+                     "dd/dv0 below": float(grad(below)[1]), "dd/dv0 above": float(grad(above)[1]),
+                     "fd across": (d_above - d_below) / (2 * delta), "exact T": v_star / (MU * G)})
+        print(rows[-1], flush=True)
+    return rows
+
+
 def markdown(rows: list[dict]) -> str:
     columns: list[str] = []
     for r in rows:
@@ -170,14 +195,21 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+PARTS = {"convergence": (convergence, "Sliding box and incline: errors against h"),
+         "gradients": (gradients, "Gradient of the sliding distance"),
+         "switch": (switch, "Gradient of the sliding distance at the stick-slip switch")}
+
+
+def main(parts: list[str]) -> None:
+    """Run the named parts (all by default) and write their tables."""
     RESULTS.mkdir(parents=True, exist_ok=True)
-    for name, rows, title in (("convergence", convergence(), "Sliding box and incline: errors against h"),
-                              ("gradients", gradients(), "Gradient of the sliding distance")):
+    for name in parts or list(PARTS):
+        make, title = PARTS[name]
+        rows = make()
         write_csv(RESULTS / f"{name}.csv", rows)
         (RESULTS / f"{name}.md").write_text(f"# {title}\n\n{__doc__}\n{markdown(rows)}")
         print(markdown(rows))
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])
