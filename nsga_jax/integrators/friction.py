@@ -153,6 +153,8 @@ class FrictionLaw(NamedTuple):
         the law's derivatives at (lam, rate) and the coordinates eliminated
         through ``matrix`` (the top-left block A)."""
         y, B = matrix.solve_with_constraints(r1, G_up)
+        if B.shape[1] < G_up.shape[0]:  # a constant matrix holds A^{-1} g_q^T only: add A^{-1} g_T^T
+            B = jnp.concatenate([B, matrix.solve(G_up[B.shape[1]:].T)], axis=1)
         D = G_low @ B
         m = D.shape[0]
         (P_lam, P_rate), (R_lam, R_rate) = jax.jacfwd(lambda a, b: self(a, b)[:2], argnums=(0, 1))(lam, rate)
