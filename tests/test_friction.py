@@ -102,7 +102,7 @@ DISTANCE_BOUND = {k: (lambda h: 1.01 * MU * G * h**2 / 8) for k in SCHEMES}
 LADDER = (4e-3, 2e-3, 1e-3)
 
 
-@ALL
+@pytest.mark.parametrize("scheme", ["DS", "MJ", *(pytest.param(k, marks=pytest.mark.slow) for k in ("DSn", "CS"))])
 def test_2d_box_slides_stops_and_rests(scheme):
     model = box_2d()
     errors = []
@@ -122,7 +122,7 @@ MJ_FAILS_AT_REST = [pytest.mark.slow, pytest.mark.xfail(strict=True, reason=(
 
 
 @pytest.mark.parametrize("direction", ["x", "diagonal"])
-@pytest.mark.parametrize("scheme", [pytest.param("DS", marks=pytest.mark.slow), "DSn", "CS",
+@pytest.mark.parametrize("scheme", [*(pytest.param(k, marks=pytest.mark.slow) for k in ("DS", "DSn", "CS")),
                                     pytest.param("MJ", marks=MJ_FAILS_AT_REST)])
 def test_3d_box_slides_stops_and_rests(scheme, direction):
     """On the friction disk: a launch along x or along the diagonal keeps its
@@ -169,7 +169,8 @@ def test_block_on_an_incline(scheme, angle, mu, sink):
     assert_energy_never_grows(model, sol)
 
 
-@pytest.mark.parametrize("scheme", [*(pytest.param(k, marks=pytest.mark.slow) for k in ("DS", "DSn", "CS")), "MJ"])
+@pytest.mark.slow
+@ALL
 def test_zero_mu_reproduces_frictionless_contacts(scheme):
     """The paper's spinning rigid box (§4.1) with mu = 0 given as a traced zero
     (friction rows present, every tangential impulse zero) follows the
