@@ -43,7 +43,8 @@ def make(p, concrete):
     height, g = jnp.asarray(p["height"], float), jnp.asarray(p["gravity"], float)
     zero = jnp.zeros_like(height)
     cube = HexSolid(size=jnp.stack([p["side"]] * 3), divisions=(n, n, n), E=p["E"], nu=p["nu"], rho=p["rho"],
-                    position=jnp.stack([zero, zero, height]), velocity=jnp.stack([jnp.asarray(p[k], float) for k in ("vx", "vy", "velocity")]))
+                    position=jnp.stack([zero, zero, height]),
+                    velocity=jnp.stack([jnp.asarray(p[k], float) for k in ("vx", "vy", "velocity")]))
     corner, top = cube.node(0, 0, 0), cube.node(0, 0, -1)  # x1: the bottom corner at (-a/2, -a/2); x8 above it
     system = System(dim=3)
     system.add_body("cube", cube)
