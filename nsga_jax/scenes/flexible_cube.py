@@ -14,6 +14,8 @@ PARAMETERS = {
     "nu": Param(0.3, "Poisson's ratio", lo=-1.0, lo_open=True, hi=0.5, hi_open=True),
     "rho": positive(1.0, "density", "kg/m^3"),
     "gravity": Param(9.81, "gravitational acceleration (along -z)", "m/s^2", lo=0.0),
+    "x0": Param(0.0, "initial x of the centroid", "m"),
+    "y0": Param(0.0, "initial y of the centroid", "m"),
     "height": Param(0.35, "initial height of the centroid above the floor", "m",
                     note="the bottom face must start on or above the floor: height >= side/2"),
     "velocity": Param(0.0, "initial vertical velocity (upward positive)", "m/s"),
@@ -43,7 +45,7 @@ def make(p, concrete):
     height, g = jnp.asarray(p["height"], float), jnp.asarray(p["gravity"], float)
     zero = jnp.zeros_like(height)
     cube = HexSolid(size=jnp.stack([p["side"]] * 3), divisions=(n, n, n), E=p["E"], nu=p["nu"], rho=p["rho"],
-                    position=jnp.stack([zero, zero, height]),
+                    position=jnp.stack([jnp.asarray(p["x0"], float), jnp.asarray(p["y0"], float), height]),
                     velocity=jnp.stack([jnp.asarray(p[k], float) for k in ("vx", "vy", "velocity")]))
     corner, top = cube.node(0, 0, 0), cube.node(0, 0, -1)  # x1: the bottom corner at (-a/2, -a/2); x8 above it
     system = System(dim=3)
