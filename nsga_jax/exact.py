@@ -183,3 +183,71 @@ def newtons_cradle(t, x0, v0, mass, radius: float, e: float):
     k = np.maximum(k, 0)
     s = (t - starts[k])[:, None]
     return xs[k] + s * vs[k], vs[k]
+
+
+def incline(t, angle: float, mu: float, gravity: float, velocity: float = 0.0):
+    """Exact distance s(t) [m] and velocity ds(t) [m/s] down a plane tilted by
+    ``angle`` [rad] of a block sliding with Coulomb friction ``mu`` (>= 0),
+    both measured along the slope, downhill positive, from s(0) = 0,
+    ds(0) = ``velocity``.
+
+    Sliding down (ds > 0) the block accelerates at a_down = g (sin - mu cos),
+    sliding up (ds < 0) at a_up = g (sin + mu cos) (downhill, slowing it); at rest it stays where
+    tan(angle) <= mu and leaves downhill at a_down otherwise. A block sliding
+    down with a_down < 0 stops at t = ds(0) / |a_down| and stays; one sent up
+    stops at t = -ds(0) / a_up and then rests or slides down.
+    """
+    t = np.asarray(t, dtype=float)
+    sin, cos = np.sin(angle), np.cos(angle)
+    a_down, a_up = gravity * (sin - mu * cos), gravity * (sin + mu * cos)
+    sticks = np.tan(angle) <= mu
+
+    def from_rest(tau):
+        a = 0.0 if sticks else a_down
+        return 0.5 * a * tau**2, a * tau
+
+    if velocity > 0.0 and a_down < 0.0:  # decelerates downhill to rest, then sticks (tan < mu)
+        t_stop = velocity / -a_down
+        tau = np.minimum(t, t_stop)
+        return velocity * tau + 0.5 * a_down * tau**2, np.where(t < t_stop, velocity + a_down * tau, 0.0)
+    if velocity > 0.0 or (velocity == 0.0 and not sticks):
+        return velocity * t + 0.5 * a_down * t**2, velocity + a_down * t
+    if velocity == 0.0:
+        return np.zeros_like(t), np.zeros_like(t)
+    t_stop = -velocity / a_up  # velocity < 0: slides up, decelerating, to rest at s_stop
+    s_stop = 0.5 * velocity * t_stop
+    tau = t - t_stop
+    s_rest, v_rest = from_rest(np.maximum(tau, 0.0))
+    up = t < t_stop
+    return (np.where(up, velocity * t + 0.5 * a_up * t**2, s_stop + s_rest),
+            np.where(up, velocity + a_up * t, v_rest))
+
+
+def housner_ratio(width: float, height: float) -> float:
+    """Housner's ratio ω+/ω- of the angular velocities after and before the
+    impact of a rigid rectangular block (``width`` b, ``height`` h [m]) rocking
+    on a floor, the landing corner sticking without rebound:
+    1 - (3/2) sin²α with α = atan(b/h) the slenderness angle (from the
+    conservation of the angular momentum about the landing corner, the
+    block's inertia about a corner being I_O = (4/3) m R², R = ½ √(b² + h²))."""
+    alpha = np.arctan2(width, height)
+    return float(1.0 - 1.5 * np.sin(alpha) ** 2)
+
+
+def rocking_impacts(width: float, height: float, gravity: float, tilt: float, n: int):
+    """Angular velocities [rad/s] (magnitudes) of a rocking block just before
+    and just after each of its first ``n`` impacts, released from rest at
+    ``tilt`` [rad] (0 < tilt < α) on one corner.
+
+    On a corner the block obeys θ'' = -p² sin(α sgn θ - θ), p² = m g R / I_O =
+    3 g / (4 R): energy ½ θ'² - p² cos(α - |θ|) is kept between impacts, so
+    the block lands with |ω-|² = 2 p² (cos(α - tilt) - cos α) and each impact
+    multiplies |ω| by :func:`housner_ratio`; after an impact it swings up and
+    lands back with the same speed. Returns (before (n,), after (n,)).
+    """
+    alpha = np.arctan2(width, height)
+    p2 = 3.0 * gravity / (2.0 * np.hypot(width, height))
+    ratio = housner_ratio(width, height)
+    first = np.sqrt(2.0 * p2 * (np.cos(alpha - tilt) - np.cos(alpha)))
+    before = first * np.abs(ratio) ** np.arange(n)
+    return before, before * abs(ratio)

@@ -111,6 +111,9 @@ KINDS = {  # the DS iteration matrices (smooth, position, velocity) each scene's
     "double_pendulum": ("Refactored", "Refactored", "ConstantInverse"),  # pins on rotating rods
     "slider_crank": ("Refactored",) * 3,  # flexible rod: M + h C changes with the beam's tangents
     "flexible_appendage": ("Refactored",) * 3,
+    # planar rigid bodies: constant mass, no joints, but corners that turn with θ (nonlinear contacts)
+    "incline": ("ConstantInverse", "Refactored", "ConstantInverse"),
+    "rocking_block": ("ConstantInverse", "Refactored", "ConstantInverse"),
 }
 
 

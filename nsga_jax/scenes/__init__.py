@@ -7,9 +7,11 @@ from . import (  # noqa: F401  (registration)
     flexible_cube,
     flexible_pendulum,
     impacting_bar,
+    incline,
     newtons_cradle,
     rigid_box,
     rigid_pendulum,
+    rocking_block,
     slider_crank,
 )
 from .base import REGISTRY, Scene, SceneSpec, configure, load_scene, parametrize, parse_override, register

@@ -82,6 +82,20 @@ def unit_interval(default, doc) -> Param:
     return Param(default, doc, "", lo=0.0, hi=1.0)
 
 
+def friction_coefficient(default: float = 0.0, where: str = "at every contact point") -> Param:
+    """The Coulomb coefficient ``mu`` (>= 0) of a scene's contacts; 0 (the
+    default of the scenes that had no friction) builds frictionless contacts
+    (``mu=None``), so their runs are those without friction."""
+    return Param(default, f"Coulomb friction coefficient {where} (0: frictionless contacts)", lo=0.0,
+                 note="a friction coefficient is >= 0")
+
+
+def contact_mu(p, concrete):
+    """A contact's ``mu`` argument: the traced ``p["mu"]`` where the validated
+    ``concrete["mu"]`` is > 0 (the contact carries friction rows), else ``None``."""
+    return p["mu"] if concrete["mu"] > 0 else None
+
+
 SOLVER_PARAMS: dict[str, Param] = {
     "scheme": Param("ds", "time integration scheme: decoupled (ds), decoupled without f^p and f* (dsn), "
                     "coupled (cs), Moreau-Jean (mj)", kind="choice", choices=SCHEME_NAMES),

@@ -2,8 +2,8 @@
 
 Built as a system: a :class:`~nsga_jax.system.RigidBody3D` in natural
 coordinates (12 coordinates, constant mass matrix, 6 quadratic rigidity
-constraints), a plane contact of its 8 vertices with the floor z = 0, and
-gravity."""
+constraints), a plane contact of its 8 vertices with the floor z = 0 (with Coulomb
+friction of coefficient ``mu`` where ``mu > 0``), and gravity."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import numpy as np
 
 from ..results import ConfigError
 from .base import SceneSpec, register
-from .params import Param, positive, unit_interval
+from .friction_forces import friction_force
+from .params import Param, contact_mu, friction_coefficient, positive, unit_interval
 
 PARAMETERS = {
     "mass": positive(46.8, "mass of the box", "kg"),
@@ -31,6 +32,7 @@ PARAMETERS = {
     "pitch": Param(0.0, "initial rotation about y (applied second)", "rad", lo=-np.pi, hi=np.pi),
     "gravity": Param(9.81, "gravitational acceleration (downward)", "m/s^2", lo=0.0),
     "e": unit_interval(0.8, "Newton restitution coefficient at every vertex"),
+    "mu": friction_coefficient(0.0, "at every vertex"),
     "floor": Param("on", "the floor z = 0 exists ('off': free flight)", kind="choice", choices=("on", "off")),
 }
 
@@ -82,7 +84,8 @@ def make(p, concrete):
         size=0.5 * jnp.linalg.norm(sides)))
     if concrete["floor"] == "on":
         system.add_contact("floor", PlaneContact("box", normal=[0.0, 0.0, 1.0], origin=[0.0, 0.0, 0.0],
-                                                 e=jnp.full(8, p["e"]), points=vertices))
+                                                 e=jnp.full(8, p["e"]), points=vertices,
+                                                 mu=contact_mu(p, concrete)))
     system.add_force("gravity", Gravity(jnp.stack([jnp.zeros(()), jnp.zeros(()), -jnp.asarray(p["gravity"], float)])))
     model = system.model()  # the scene's parameters and check() rule out an inconsistent initial state
     q0, v0 = model.initial_state()
@@ -101,6 +104,9 @@ def make(p, concrete):
             out[f"gapdot_{k}"] = v[:, 2] + Rdot[:, 2, :] @ vertices[k]
         out["energy"] = 0.5 * jnp.einsum("ti,ij,tj->t", v, M, v) + p["mass"] * p["gravity"] * q[:, 2]
         out["rotation"] = R
+        if concrete["floor"] == "on" and concrete["mu"] > 0:
+            force = friction_force(sol, [0.0, 0.0, 1.0])
+            out["friction_x"], out["friction_y"] = force[:, 0], force[:, 1]
         return out
 
     return model, q0, v0, observables
@@ -115,12 +121,13 @@ SPEC = register(
         make=make,
         check=check,
         observables=("x", "y", "z", "vx", "vy", "vz", "omega_x", "omega_y", "omega_z",
-                     *(f"gap_{k}" for k in range(8)), *(f"gapdot_{k}" for k in range(8)), "energy", "rotation"),
+                     *(f"gap_{k}" for k in range(8)), *(f"gapdot_{k}" for k in range(8)), "energy", "rotation",
+                     "friction_x", "friction_y"),
         error_observables=("gap_5", "gapdot_5"),  # x_p: the vertex that hits the floor
         units={"x": "m", "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s",
                "omega_x": "rad/s", "omega_y": "rad/s", "omega_z": "rad/s",
                **{f"gap_{k}": "m" for k in range(8)}, **{f"gapdot_{k}": "m/s" for k in range(8)},
-               "energy": "J", "rotation": ""},
+               "energy": "J", "rotation": "", "friction_x": "N", "friction_y": "N"},
         plotted=("z", "vz", "gap_5", "gapdot_5", "omega_x", "omega_y", "omega_z", "energy"),
     )
 )
