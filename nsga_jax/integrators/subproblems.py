@@ -137,8 +137,9 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
 
     With frictional contacts, the correction also carries Coulomb's law at
     position level (:mod:`~nsga_jax.integrators.friction`): the tangential
-    multipliers ν_T act along g_T(q̃) on the slip of the contact points over
-    the step, Δ_T = g_T(q̃) (q̃ + U - q_n) (``q_prev`` is q_n), within the disk
+    multipliers ν_T act along g_T(q_m) on the slip of the contact points over
+    the step, Δ_T = g_T(q_m) (q̃ + U - q_n), q_m = (q_n + q̃)/2 (``q_prev`` is
+    q_n), within the disk
     of radius μ times the normal correction ξ_N: a sticking point does not
     move over the step, a sliding one is held back by μ ξ_N."""
     tol_r, tol_f, _ = tol
@@ -146,8 +147,9 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
     law = FrictionLaw.of(model, True, unilateral, kp, pp, smooth.q.dtype) if has_friction(model) else None
-    GT = model.tangent_jacobian(smooth.q) if law is not None else None
     assert law is None or q_prev is not None, "friction at position level needs the state q_n"
+    # the slip over the step by the midpoint rule: exact to O(|q̃ - q_n|³) on a turning body
+    GT = model.tangent_jacobian(0.5 * (q_prev + smooth.q)) if law is not None else None
     curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
     GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
