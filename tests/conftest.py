@@ -40,6 +40,7 @@ def no_compilation(monkeypatch):
 
 LONG = {
     "test_scene_defaults.py::test_every_scene_runs_at_its_defaults",
+    "test_scene_defaults.py::test_scenes_with_friction_run_at_their_defaults",
     # Tests of 4 s or more on a 2-core machine (pytest --durations), run by `pytest -m slow`
     # (CI runs both suites); each feature keeps a quicker test in the default run.
     "test_assembly.py::test_fast_path_equals_generic_path",

@@ -22,9 +22,7 @@ def test_every_scene_runs_at_its_defaults(name):
 
 FRICTION = [
     ("rigid_box", {"mu": 0.5, "e": 0.0}),
-    pytest.param("flexible_cube", {"mu": 0.5, "vx": 0.2}, marks=pytest.mark.xfail(strict=True, reason=(
-        "the velocity sub-problem stalls at the first impact (step 8245, t = 0.24735 s: residual 4.7e-9 "
-        "against a tolerance of 1.0e-10 at the iteration cap)"))),
+    ("flexible_cube", {"mu": 0.5, "vx": 0.2}),
     ("bouncing_ball", {"mu": 0.5, "vx": 1.0, "spin": 10.0}),
 ]
 GROWTH = {"rigid_box": 2e-3}  # the box's energy in natural coordinates wavers by 1.5e-3 in flight, frictionless too

@@ -11,11 +11,13 @@ velocity γ_T,j = g_T,j(q) v. Coulomb's law at impulse level,
 is written, as Alart and Curnier do, as a projection of the augmented
 tangential multiplier on the disk of radius μ_j P_N,j:
 
-    σ_T = kv Λ_T - pv γ_T,    P_T = proj_{D(μ P_N)}(σ_T),
-    residual row  -(kv/pv) (kv Λ_T - P_T)  = 0,
+    σ_T = kv Λ_T - p_T γ_T,    P_T = proj_{D(μ P_N)}(σ_T),
+    residual row  -(kv/p_T) (kv Λ_T - P_T)  = 0,
+
+with the penalty p_T,j the contact's own effective mass (:func:`contact_masses`),
 
 which is -kv γ_T (stick: the slip velocity vanishes) inside the disk,
-the slip law on its edge, and -(kv²/pv) Λ_T (no impulse) on an open contact
+the slip law on its edge, and -(kv²/p_T) Λ_T (no impulse) on an open contact
 (P_N = 0). The normal part is the frictionless law of eq. 42 unchanged:
 σ_N = kv Λ_N - pv ġ_N, P_N = σ_N on the active set. The multipliers of a
 velocity sub-problem are then ``[Λ_N (nc); Λ_T (nf · d)]`` and its reaction
@@ -97,10 +99,11 @@ class LawParts(NamedTuple):
 
 
 def contact_law(lam: jax.Array, rate: jax.Array, candidates, unilateral, mu: jax.Array,
-                normals: tuple[int, ...], d: int, k: Scalar, p: Scalar) -> LawParts:
+                normals: tuple[int, ...], d: int, k: Scalar, p: Scalar, p_t: jax.Array) -> LawParts:
     """The velocity-level law of every contact row at the multipliers ``lam``
-    and rates ``rate`` (both nc + nf·d): eq. 42's normal law and
-    Alart–Curnier's tangential one (module docstring)."""
+    and rates ``rate`` (both nc + nf·d): eq. 42's normal law (scaling k,
+    penalty p) and Alart–Curnier's tangential one (penalty p_t (nf,) per
+    contact, :func:`contact_masses`; module docstring)."""
     nc = unilateral.shape[0]
     lam_n, rate_n = lam[:nc], rate[:nc]
     aug = k * lam_n - p * rate_n
@@ -110,9 +113,22 @@ def contact_law(lam: jax.Array, rate: jax.Array, candidates, unilateral, mu: jax
     if rate.shape[0] == nc:
         return LawParts(P_n, r_n, active, aug)
     lam_t, rate_t = lam[nc:].reshape(-1, d), rate[nc:].reshape(-1, d)
-    P_t = disk_projection(k * lam_t - p * rate_t, mu * P_n[jnp.asarray(normals)])
-    r_t = -(k / p) * (k * lam_t - P_t)
+    P_t = disk_projection(k * lam_t - p_t[:, None] * rate_t, mu * P_n[jnp.asarray(normals)])
+    r_t = -(k / p_t[:, None]) * (k * lam_t - P_t)
     return LawParts(jnp.concatenate([P_n, P_t.ravel()]), jnp.concatenate([r_n, r_t.ravel()]), active, aug)
+
+
+def contact_masses(mass_diagonal: jax.Array, GT: jax.Array, d: int) -> jax.Array:
+    """The effective mass [kg] of each frictional contact's tangential
+    motion, 1 / w_j with w_j ≈ g_T,j M^{-1} g_T,jᵀ from the diagonal of M
+    (the mean over the contact's d tangents), shape (nf,): the tangential
+    penalty of Alart and Curnier's law. Its value never changes the
+    solution, only Newton's path, which a penalty far from the contact's own
+    mass makes long or cyclic: a node of the 125-element cube weighs 1/200
+    of the system's mass m̄, and with m̄ as penalty its velocity jumps
+    stalled at the iteration cap."""
+    w = jnp.sum(GT**2 / mass_diagonal, axis=1).reshape(-1, d).mean(axis=1)
+    return 1.0 / jnp.maximum(w, jnp.finfo(w.dtype).tiny)
 
 
 class FrictionLaw(NamedTuple):
@@ -126,16 +142,21 @@ class FrictionLaw(NamedTuple):
     d: int
     k: Scalar
     p: Scalar
+    p_t: jax.Array
 
     @classmethod
-    def of(cls, model: Model, candidates, unilateral, k: Scalar, p: Scalar, dtype) -> "FrictionLaw":
-        mu = jnp.asarray(model.friction_coefficients, dtype)
+    def of(cls, model: Model, candidates, unilateral, k: Scalar, p: Scalar, mass_diagonal: jax.Array,
+           GT: jax.Array) -> "FrictionLaw":
+        """The law with the normal scaling k and penalty p, and the tangential
+        penalties from the mass diagonal (n,) and the tangent rows g_T (nf·d, n)."""
+        mu = jnp.asarray(model.friction_coefficients, GT.dtype)
+        d = model.friction_dim
         return cls(jnp.broadcast_to(candidates, unilateral.shape), unilateral, mu, model.friction_normals,
-                   model.friction_dim, k, p)
+                   d, k, p, contact_masses(mass_diagonal, GT, d))
 
     def __call__(self, lam: jax.Array, rate: jax.Array) -> LawParts:
         return contact_law(lam, rate, self.candidates, self.unilateral, self.mu, self.normals, self.d,
-                           self.k, self.p)
+                           self.k, self.p, self.p_t)
 
     def residual(self, inertia: Vector, force: Vector, G: jax.Array, rate: jax.Array, lam: jax.Array,
                  tol_r, tol_f) -> Residual:

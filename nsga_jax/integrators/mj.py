@@ -112,7 +112,10 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
     n, nc = model.n_dof, model.n_constraints
     kv = pv = Scaling.of(model, h).kv
     unilateral = is_unilateral(model)
-    law = FrictionLaw.of(model, candidates, unilateral, kv, pv, q_n.dtype) if has_friction(model) else None
+    law = None
+    if has_friction(model):  # tangential penalties from the start of the step
+        law = FrictionLaw.of(model, candidates, unilateral, kv, pv, jnp.diagonal(ops.mass.matrix(model, q_n)),
+                             model.tangent_jacobian(q_n))
 
     def position(v):
         return q_n + h * (theta * v + (1.0 - theta) * v_n)

@@ -67,21 +67,54 @@ class Residual(NamedTuple):
     aux: Any
 
 
+LINE_SEARCH_HALVINGS = 6
+"""The most halvings of a damped Newton update (:func:`damped_step`)."""
+
+
 class Problem(NamedTuple):
-    """The three functions of a Newton sub-problem (see the module docstring)."""
+    """The three functions of a Newton sub-problem (see the module docstring).
+    ``line_search`` (static): damp each update until the residual norm
+    decreases (:func:`damped_step`), for residuals whose semi-smooth Newton
+    may cycle (Coulomb friction's projection on a disk)."""
 
     residual: Callable[[Any], Residual]
     linearise: Callable[[Any, Residual], Any]
     correct: Callable[[Any, Residual, Any], tuple[Any, Scalar]]
+    line_search: bool = False
 
     def update(self, x, res: Residual) -> tuple[Any, Scalar]:
         """The Newton correction with the iteration matrix at x."""
         return self.correct(x, res, self.linearise(x, res))
 
     @classmethod
-    def from_update(cls, residual, update) -> "Problem":
+    def from_update(cls, residual, update, line_search: bool = False) -> "Problem":
         """A problem whose correction always builds its own matrix (no reuse)."""
-        return cls(residual, lambda x, res: None, lambda x, res, _: update(x, res))
+        return cls(residual, lambda x, res: None, lambda x, res, _: update(x, res), line_search)
+
+
+def damped_step(residual: Callable[[Any], Residual], x, dx, res: Residual) -> tuple[Any, Residual]:
+    """``x + α dx`` with α = 1, 1/2, 1/4, ... (at most
+    :data:`LINE_SEARCH_HALVINGS` halvings): the first that decreases the
+    residual norm by the Armijo factor 1 - 1e-4 α, or the last tried. A full
+    Newton step that decreases the norm is taken as it is, so where Newton
+    converges the iterates are Newton's."""
+    norm = jnp.linalg.norm(res.r)
+
+    def trial(alpha):
+        x_new = jax.tree_util.tree_map(lambda a, b: a + alpha * b, x, dx)
+        return x_new, residual(x_new)
+
+    def too_long(carry):
+        alpha, (_, res_new), k = carry
+        return (~(jnp.linalg.norm(res_new.r) <= (1.0 - 1e-4 * alpha) * norm)) & (k < LINE_SEARCH_HALVINGS)
+
+    def halve(carry):
+        alpha, _, k = carry
+        return alpha / 2, trial(alpha / 2), k + 1
+
+    one = jnp.ones((), norm.dtype)
+    _, (x_new, res_new), _ = lax.while_loop(too_long, halve, (one, trial(one), jnp.zeros((), jnp.int32)))
+    return x_new, res_new
 
 
 class NewtonResult(eqx.Module):
@@ -160,18 +193,23 @@ def newton(
         done = (norm < margin * tolerance) | (refactor & (norm < tolerance))
         return ~done & (it < max_iter) & jnp.isfinite(norm)
 
+    def step(x, dx, res):
+        if problem.line_search:
+            return damped_step(residual, x, dx, res)
+        x_new = jax.tree_util.tree_map(jnp.add, x, dx)
+        return x_new, residual(x_new)
+
     def body(carry):
         x, res, _, it = carry
         dx, floor = problem.update(x, res)
-        x = jax.tree_util.tree_map(jnp.add, x, dx)
-        return x, residual(x), floor, it + 1
+        x, res = step(x, dx, res)
+        return x, res, floor, it + 1
 
     def body_reusing(carry):
         x, res, floor, it, held, refactor, margin = carry
         held = where_needed(refactor, lambda: problem.linearise(x, res), held)
         dx, new_floor = problem.correct(x, res, held)
-        x_new = jax.tree_util.tree_map(jnp.add, x, dx)
-        res_new = residual(x_new)
+        x_new, res_new = step(x, dx, res)
         # an iterate of a held factorisation must pass the test with a margin: it
         # converges linearly, where Newton's last iterate lands far below the test
         new_margin = jnp.where(refactor, 1.0, CONTRACTION).astype(floor.dtype)

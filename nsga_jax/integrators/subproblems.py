@@ -146,10 +146,12 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
-    law = FrictionLaw.of(model, True, unilateral, kp, pp, smooth.q.dtype) if has_friction(model) else None
-    assert law is None or q_prev is not None, "friction at position level needs the state q_n"
-    # the slip over the step by the midpoint rule: exact to O(|q̃ - q_n|³) on a turning body
-    GT = model.tangent_jacobian(0.5 * (q_prev + smooth.q)) if law is not None else None
+    law = GT = None
+    if has_friction(model):
+        assert q_prev is not None, "friction at position level needs the state q_n"
+        # the slip over the step by the midpoint rule: exact to O(|q̃ - q_n|³) on a turning body
+        GT = model.tangent_jacobian(0.5 * (q_prev + smooth.q))
+        law = FrictionLaw.of(model, True, unilateral, kp, pp, jnp.diagonal(ops.mass.matrix(model, smooth.q)), GT)
     curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
     GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
@@ -208,7 +210,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         dU, dnu = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kp, pp)
         return (dU, dnu), floor
 
-    return Problem(residual, linearise, correct)
+    return Problem(residual, linearise, correct, line_search=law is not None)
 
 
 def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,
@@ -228,10 +230,12 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     q = smooth.q + U
     G = ops.constraints.jacobian(model, q)
     restituted = restitution(model, q.dtype) * G_prev_v_prev
-    law = FrictionLaw.of(model, candidates, unilateral, kv, pv, q.dtype) if has_friction(model) else None
-    if law is not None:  # the rows whose rates the law constrains: g_q and g_T
+    law = None
+    if has_friction(model):  # the rows whose rates the law constrains: g_q and g_T
         G = velocity_rows(model, q, G)
         restituted = jnp.concatenate([restituted, jnp.zeros((G.shape[0] - restituted.shape[0],), q.dtype)])
+        law = FrictionLaw.of(model, candidates, unilateral, kv, pv, jnp.diagonal(ops.mass.matrix(model, q)),
+                             G[model.n_constraints:])
     f_const = None
     if with_forces:
         # terms of f* (eq. 8) that W does not change: (g_q^T - g̃_q^T) λ̃ - (M(q) - M(q̃)) v̇̃
@@ -288,4 +292,4 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         dW, dLam = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kv, pv)
         return (dW, dLam), floor
 
-    return Problem(residual, linearise, correct)
+    return Problem(residual, linearise, correct, line_search=law is not None)
