@@ -145,14 +145,17 @@ class FrictionLaw(NamedTuple):
     p_t: jax.Array
 
     @classmethod
-    def of(cls, model: Model, candidates, unilateral, k: Scalar, p: Scalar, mass_diagonal: jax.Array,
+    def of(cls, model: Model, candidates, unilateral, k: Scalar, p: Scalar, mass_diagonal: jax.Array | None,
            GT: jax.Array) -> "FrictionLaw":
         """The law with the normal scaling k and penalty p, and the tangential
-        penalties from the mass diagonal (n,) and the tangent rows g_T (nf·d, n)."""
+        penalties from the mass diagonal (n,) and the tangent rows g_T (nf·d, n)
+        (``mass_diagonal=None``: p for every contact)."""
         mu = jnp.asarray(model.friction_coefficients, GT.dtype)
         d = model.friction_dim
+        nf = model.n_friction
+        p_t = (jnp.full((nf,), p, GT.dtype) if mass_diagonal is None else contact_masses(mass_diagonal, GT, d))
         return cls(jnp.broadcast_to(candidates, unilateral.shape), unilateral, mu, model.friction_normals,
-                   d, k, p, contact_masses(mass_diagonal, GT, d))
+                   d, k, p, p_t)
 
     def __call__(self, lam: jax.Array, rate: jax.Array) -> LawParts:
         return contact_law(lam, rate, self.candidates, self.unilateral, self.mu, self.normals, self.d,

@@ -151,7 +151,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         assert q_prev is not None, "friction at position level needs the state q_n"
         # the slip over the step by the midpoint rule: exact to O(|q̃ - q_n|³) on a turning body
         GT = model.tangent_jacobian(0.5 * (q_prev + smooth.q))
-        law = FrictionLaw.of(model, True, unilateral, kp, pp, jnp.diagonal(ops.mass.matrix(model, smooth.q)), GT)
+        law = FrictionLaw.of(model, True, unilateral, kp, pp, None, GT)  # tangential penalty pp, as the normal
     curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
     GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
@@ -210,7 +210,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         dU, dnu = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kp, pp)
         return (dU, dnu), floor
 
-    return Problem(residual, linearise, correct, line_search=law is not None)
+    return Problem(residual, linearise, correct)
 
 
 def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,

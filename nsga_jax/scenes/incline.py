@@ -48,6 +48,7 @@ def check(p):
 
 
 def make(p, concrete):
+    import jax
     import jax.numpy as jnp
 
     from ..system import Gravity, PlaneContact, RigidBody2D, System
@@ -69,10 +70,9 @@ def make(p, concrete):
 
     def observables(sol):
         q, v = sol.q, sol.v
-        inertia = m * (length**2 + height**2) / 12.0
         out = {"s": (q[:, :2] - q0[:2]) @ down, "ds": v[:, :2] @ down, "rotation": q[:, 2] + a,
                "omega": v[:, 2],
-               "energy": 0.5 * m * (v[:, 0] ** 2 + v[:, 1] ** 2) + 0.5 * inertia * v[:, 2] ** 2 + m * g * q[:, 1]}
+               "energy": jax.vmap(model.energy)(q, v)}
         if concrete["mu"] > 0:
             out["friction"] = friction_force(sol, normal) @ down
         return out

@@ -57,6 +57,7 @@ def corner_velocities(q, v, corners):
 
 
 def make(p, concrete):
+    import jax
     import jax.numpy as jnp
 
     from ..system import Gravity, PlaneContact, RigidBody2D, System
@@ -81,7 +82,7 @@ def make(p, concrete):
         q, v = sol.q, sol.v
         slip = corner_velocities(q, v, corners)[:, :, 0]
         out = {"theta": q[:, 2], "omega": v[:, 2], "x": q[:, 0], "y": q[:, 1],
-               "energy": 0.5 * m * (v[:, 0] ** 2 + v[:, 1] ** 2) + 0.5 * inertia * v[:, 2] ** 2 + m * g * q[:, 1],
+               "energy": jax.vmap(model.energy)(q, v),
                "slip_left": slip[:, 0], "slip_right": slip[:, 1]}
         if concrete["mu"] > 0:
             out["friction"] = friction_force(sol, [0.0, 1.0])[:, 0]
