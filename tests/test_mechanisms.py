@@ -110,18 +110,22 @@ def test_slider_crank_refuses_inconsistent_setups(no_compilation):
 
 
 def test_ds_converges_where_cs_fails_at_a_large_step():
-    """h = 1e-3 s on the default slider-crank: DS converges through the impact
+    """h = 3e-3 s on the default slider-crank: DS converges through the impact
     with a few linear solves per step and holds every joint; CS diverges at
-    the impact (t ≈ 0.043 s)."""
-    ds = load_scene("slider_crank", {"h": 1e-3}).run(throw=False, progress=False)
-    cs = load_scene("slider_crank", {"h": 1e-3, "scheme": "cs", "max_iter": 200}).run(throw=False, progress=False)
+    the impact (t ≈ 0.042 s). At 1e-3 and 2e-3 s CS's coupled iteration
+    wanders for up to 110 global iterations at the impact, and whether it
+    lands within the cap of 200 depends on round-off (docs/mechanisms.md), so
+    the test takes the smallest step of the study where CS's failure does not."""
+    h = 3e-3
+    ds = load_scene("slider_crank", {"h": h}).run(throw=False, progress=False)
+    cs = load_scene("slider_crank", {"h": h, "scheme": "cs", "max_iter": 200}).run(throw=False, progress=False)
     assert ds.stats["failed_steps"] == 0
     assert ds.stats["max_bilateral_violation_position"] <= BILATERAL_TOL
     assert ds.stats["iterations"]["linear_solves"]["max"] <= 15
     assert cs.stats["failed_steps"] > 0
     first = float(cs.ts[cs.failed_steps[0]])
     impact = float(ds.ts[np.argmax(np.asarray(ds.observables["force"]) > 0)])
-    assert abs(first - impact) <= 3e-3
+    assert abs(first - impact) <= h
 
 
 # ---------------------------------------------------------- flexible appendage

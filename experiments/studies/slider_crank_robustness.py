@@ -131,7 +131,7 @@ def plot(rows, reference: str, path: Path) -> Path:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("experiments/out/slider_crank_robustness"))
-    parser.add_argument("--hs", default="3e-5,1e-4,3e-4,1e-3,2e-3,5e-3")
+    parser.add_argument("--hs", default="3e-5,1e-4,3e-4,1e-3,2e-3,3e-3,5e-3")
     parser.add_argument("--ref-h", type=float, default=3e-6)
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
