@@ -144,21 +144,3 @@ def pytest_collection_modifyitems(config, items):
         test = f"{path.split('/')[-1]}::{rest}"
         if test in LONG or test.split("[")[0] in LONG:
             item.add_marker(pytest.mark.slow)
-        if test in REGRESSED:
-            item.add_marker(pytest.mark.xfail(strict=False, reason=REGRESSED_REASON))
-
-
-REGRESSED = {
-    "test_friction.py::test_3d_box_slides_stops_and_rests[DS-x]",
-    "test_friction.py::test_3d_box_slides_stops_and_rests[DS-diagonal]",
-    "test_friction.py::test_3d_box_slides_stops_and_rests[DSn-x]",
-    "test_friction.py::test_3d_box_slides_stops_and_rests[DSn-diagonal]",
-    "test_friction.py::test_3d_box_slides_stops_and_rests[CS-x]",
-    "test_friction.py::test_3d_box_slides_stops_and_rests[CS-diagonal]",
-    "test_friction.py::test_zero_mu_reproduces_frictionless_contacts[CS]",
-    "test_friction.py::test_gradient_of_the_sliding_distance[discrete]",
-    "test_friction.py::test_gradient_of_the_sliding_distance[impact-time]",
-    "test_scene_defaults.py::test_every_scene_runs_at_its_defaults[rocking_block]",
-}
-REGRESSED_REASON = ("long friction tests that fail since the per-contact tangential penalty and the damped velocity "
-                    "jump were added (2026-12-02); the causes are not yet investigated (see the friction page)")

@@ -128,12 +128,18 @@ MJ_FAILS_AT_REST = [pytest.mark.slow, pytest.mark.xfail(strict=True, reason=(
                                     pytest.param("MJ", marks=MJ_FAILS_AT_REST)])
 def test_3d_box_slides_stops_and_rests(scheme, direction):
     """On the friction disk: a launch along x or along the diagonal keeps its
-    direction and stops after v0²/(2 mu g), to the stopping step's O(h²)."""
+    direction and stops after v0²/(2 mu g), to the stopping step's O(h²).
+
+    The Newton tolerance is tight (tol_r = 1e-10) so that "no rotation" can be
+    asserted to round-off: in the last steps before the stop the disk
+    projection converges in two iterations to eq. 51's default bound, which
+    leaves rotational velocities of its size (1.5e-7 1/s, 1.6e-9 in the
+    rotation matrix at h = 2e-3)."""
     u = np.array([1.0, 0.0]) if direction == "x" else np.array([1.0, 1.0]) / np.sqrt(2)
     model = box_3d([V0 * u[0], V0 * u[1], 0.0])
     errors = []
     for h in (2e-3, 1e-3):
-        sol = run(model, scheme, 1.2, h)
+        sol = run(model, type(SCHEMES[scheme])(tol_r=1e-10), 1.2, h)
         errors.append(check_slide_and_rest(model, sol, h, slice(0, 2), u))
     assert abs(errors[0]) <= DISTANCE_BOUND[scheme](2e-3) and abs(errors[1]) <= DISTANCE_BOUND[scheme](1e-3), errors
 
@@ -176,7 +182,11 @@ def test_block_on_an_incline(scheme, angle, mu, sink):
 def test_zero_mu_reproduces_frictionless_contacts(scheme):
     """The paper's spinning rigid box (§4.1) with mu = 0 given as a traced zero
     (friction rows present, every tangential impulse zero) follows the
-    frictionless run to round-off."""
+    frictionless run to the Newton tolerance: the frictional velocity jump is
+    solved through a contact-space system of normal and tangential unknowns
+    where the frictionless one is not, so their round-off differs, and the
+    iterations, stopped at eq. 51's bound, carry that difference (CS: 5.1e-11
+    m/s and 1.3e-12 m apart over 0.69 s, with or without damped updates)."""
     scene = load_scene("rigid_box")
     model, q0, v0 = scene.model, scene.q0, scene.v0
     frictional = rebuild_with_mu(model, jnp.zeros(()))
@@ -185,8 +195,9 @@ def test_zero_mu_reproduces_frictionless_contacts(scheme):
     a = nsga_jax.simulate(model, SCHEMES[scheme], 0.0, t_end, h, q0, v0)
     b = nsga_jax.simulate(frictional, SCHEMES[scheme], 0.0, t_end, h, q0, v0)
     assert len(a.failed_steps) == len(b.failed_steps) == 0
-    np.testing.assert_allclose(np.asarray(b.q), np.asarray(a.q), rtol=0, atol=1e-12)
+    # velocities within the Newton tolerance of each other; positions within h times that per step
     np.testing.assert_allclose(np.asarray(b.v), np.asarray(a.v), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(b.q), np.asarray(a.q), rtol=0, atol=1e-9 * t_end)
     assert np.abs(np.asarray(b.records.friction)).max() < 1e-12
     # the frictionless run's energy is not monotone for the generalized-alpha schemes (DS, DSn, CS
     # gain up to 3.5 J of 2284 J in a step at h = 1 ms); with mu = 0 it is the same energy
@@ -311,14 +322,17 @@ def test_gradient_of_the_sliding_distance(adjoint):
     2.3e-4 in mu, 6.2e-4 in v0). What the gradient is at the stick–slip
     switch: the discrete run slides for a whole number N of steps, and x is a
     smooth function of (mu, v0) for each N; the gradient is that piece's
-    derivative. d(x)/d(v0) is exactly the sliding time on the grid, N h
-    (0.680 s against T = 0.6796 s; MJ's is (N - 1/2) h). Where T crosses a
-    step time (v0* = 680 h mu g here) N grows by one: x stays continuous
-    (no jump in the value, so no jump term is missing) but its derivative
-    jumps by h, from 0.680 to 0.681: x(v0) is piecewise smooth with kinks
-    h mu g apart in v0, and the gradient is a staircase within h of the
-    exact v0/(mu g). Both adjoints give the same gradient here (no contact
-    closes: the box rests on the floor from the start)."""
+    derivative. d(x)/d(v0) is exactly the sliding time on the grid, N h,
+    with N h the step time nearest T (0.680 s against T = 0.6796 s): the
+    position correction takes the last step's slip by the midpoint rule, so
+    the run stops in the step whose midpoint T passes (MJ's derivative is
+    (N - 1/2) h with N h the first step time past T). Where T crosses a
+    half-step time (v0* = 680.5 h mu g here) N grows by one: x stays
+    continuous (no jump in the value, so no jump term is missing) but its
+    derivative jumps by h, from 0.680 to 0.681: x(v0) is piecewise smooth
+    with kinks h mu g apart in v0, and the gradient is a staircase within h/2
+    of the exact v0/(mu g). Both adjoints give the same gradient here (no
+    contact closes: the box rests on the floor from the start)."""
     scheme = nsga_jax.DS(tol_r=1e-12, tol_f=1e-12)
     h, n = 1e-3, 1000
     p = jnp.array([MU, V0])
@@ -328,13 +342,13 @@ def test_gradient_of_the_sliding_distance(adjoint):
     fd = np.array([(float(value(p.at[k].mul(1 + 1e-6))) - float(value(p.at[k].mul(1 - 1e-6)))) / (2e-6 * float(p[k]))
                    for k in range(2)])
     np.testing.assert_allclose(grad, fd, rtol=1e-6)
-    t_grid = np.ceil(T_EXACT / h) * h
+    t_grid = np.round(T_EXACT / h) * h
     np.testing.assert_allclose(grad[1], t_grid, rtol=1e-9)
-    assert abs(grad[1] - V0 / (MU * G)) <= h
+    assert abs(grad[1] - V0 / (MU * G)) <= h / 2
     # -v0²/(2 mu² g) = -g T²/2: a sliding time off by at most h moves it by at most g T h
     assert abs(grad[0] + V0**2 / (2 * MU**2 * G)) <= G * T_EXACT * h
-    # across the switch at v0* (T = 0.680 s on a step time): continuous value, derivative up by h
-    v_star, delta = 680 * h * MU * G, 1e-7
+    # across the switch at v0* (T = 0.6805 s on a half-step time): continuous value, derivative up by h
+    v_star, delta = 680.5 * h * MU * G, 1e-7
     below, above = jnp.array([MU, v_star - delta]), jnp.array([MU, v_star + delta])
     np.testing.assert_allclose([float(grad_fn(below)[1]), float(grad_fn(above)[1])], [0.680, 0.681], rtol=1e-9)
     assert abs(float(value(above)) - float(value(below))) <= 2 * delta * 0.681 + 1e-12

@@ -122,9 +122,10 @@ class CS(AbstractGenAlpha):
             xp = _add(xp, dxp)
             rp = position.residual(xp)
             velocity = velocity_res(xs, xp, rp.aux.active)
-            dxv, fv = velocity.update(xv, velocity.residual(xv))
-            xv = _add(xv, dxv)
-            rs_new = (smooth_res(xs, xp, xv).residual(xs), rp, velocity.residual(xv))
+            rv = velocity.residual(xv)
+            dxv, fv = velocity.update(xv, rv)
+            xv, rv = velocity.advance(xv, dxv, rv)  # damped with friction, as in DS's velocity jump
+            rs_new = (smooth_res(xs, xp, xv).residual(xs), rp, rv)
             return (xs, xp, xv), rs_new, jnp.stack([fs, fp, fv]), it + 1
 
         def status(rs, floors):

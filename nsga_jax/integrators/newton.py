@@ -86,6 +86,14 @@ class Problem(NamedTuple):
         """The Newton correction with the iteration matrix at x."""
         return self.correct(x, res, self.linearise(x, res))
 
+    def advance(self, x, dx, res: Residual) -> tuple[Any, Residual]:
+        """``x + dx`` and its residual, damped by :func:`damped_step` when
+        ``line_search`` is set (``res`` is the residual at x)."""
+        if self.line_search:
+            return damped_step(self.residual, x, dx, res)
+        x_new = jax.tree_util.tree_map(jnp.add, x, dx)
+        return x_new, self.residual(x_new)
+
     @classmethod
     def from_update(cls, residual, update, line_search: bool = False) -> "Problem":
         """A problem whose correction always builds its own matrix (no reuse)."""
@@ -193,23 +201,17 @@ def newton(
         done = (norm < margin * tolerance) | (refactor & (norm < tolerance))
         return ~done & (it < max_iter) & jnp.isfinite(norm)
 
-    def step(x, dx, res):
-        if problem.line_search:
-            return damped_step(residual, x, dx, res)
-        x_new = jax.tree_util.tree_map(jnp.add, x, dx)
-        return x_new, residual(x_new)
-
     def body(carry):
         x, res, _, it = carry
         dx, floor = problem.update(x, res)
-        x, res = step(x, dx, res)
+        x, res = problem.advance(x, dx, res)
         return x, res, floor, it + 1
 
     def body_reusing(carry):
         x, res, floor, it, held, refactor, margin = carry
         held = where_needed(refactor, lambda: problem.linearise(x, res), held)
         dx, new_floor = problem.correct(x, res, held)
-        x_new, res_new = step(x, dx, res)
+        x_new, res_new = problem.advance(x, dx, res)
         # an iterate of a held factorisation must pass the test with a margin: it
         # converges linearly, where Newton's last iterate lands far below the test
         new_margin = jnp.where(refactor, 1.0, CONTRACTION).astype(floor.dtype)

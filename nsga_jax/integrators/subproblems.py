@@ -141,7 +141,8 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     the step, Δ_T = g_T(q_m) (q̃ + U - q_n), q_m = (q_n + q̃)/2 (``q_prev`` is
     q_n), within the disk
     of radius μ times the normal correction ξ_N: a sticking point does not
-    move over the step, a sliding one is held back by μ ξ_N."""
+    move over the step, a sliding one is held back by μ ξ_N. Its Newton
+    updates are damped (``Problem.line_search``), as the velocity jump's."""
     tol_r, tol_f, _ = tol
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
@@ -210,7 +211,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         dU, dnu = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kp, pp)
         return (dU, dnu), floor
 
-    return Problem(residual, linearise, correct)
+    return Problem(residual, linearise, correct, line_search=law is not None)
 
 
 def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,
