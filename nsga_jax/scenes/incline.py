@@ -23,6 +23,7 @@ import numpy as np
 from ..exact import incline
 from ..results import ConfigError
 from .base import SceneSpec, register
+from .block import block_on_line
 from .friction_forces import friction_force
 from .params import Param, contact_mu, friction_coefficient, positive
 
@@ -51,21 +52,14 @@ def make(p, concrete):
     import jax
     import jax.numpy as jnp
 
-    from ..system import Gravity, PlaneContact, RigidBody2D, System
 
     m, a, g = (jnp.asarray(p[k], float) for k in ("mass", "angle", "gravity"))
     length, height = jnp.asarray(p["length"], float), jnp.asarray(p["height"], float)
     normal = jnp.stack([jnp.sin(a), jnp.cos(a)])
     down = jnp.stack([jnp.cos(a), -jnp.sin(a)])
     centre = 0.5 * height * normal
-    corners = jnp.stack([jnp.stack([-0.5 * length, -0.5 * height]), jnp.stack([0.5 * length, -0.5 * height])])
-    system = System(dim=2)
-    system.add_body("block", RigidBody2D(m, m * (length**2 + height**2) / 12.0, position=centre, angle=-a,
-                                         velocity=p["velocity"] * down))
-    system.add_contact("slope", PlaneContact("block", normal=normal, origin=jnp.zeros(2), e=0.0, points=corners,
-                                             mu=contact_mu(p, concrete)))
-    system.add_force("gravity", Gravity(jnp.stack([jnp.zeros_like(g), -g])))
-    model = system.model()
+    model, _ = block_on_line(m, length, height, position=centre, angle=-a, velocity=p["velocity"] * down,
+                             normal=normal, mu=contact_mu(p, concrete), gravity=g, contact="slope")
     q0, v0 = model.initial_state()
 
     def observables(sol):

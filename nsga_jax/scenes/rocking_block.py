@@ -23,6 +23,7 @@ import numpy as np
 
 from ..results import ConfigError
 from .base import SceneSpec, register
+from .block import block_on_line
 from .friction_forces import friction_force
 from .params import Param, contact_mu, friction_coefficient, positive
 
@@ -60,7 +61,6 @@ def make(p, concrete):
     import jax
     import jax.numpy as jnp
 
-    from ..system import Gravity, PlaneContact, RigidBody2D, System
 
     m, b, hb, g, tilt = (jnp.asarray(p[k], float) for k in ("mass", "width", "height", "gravity", "tilt"))
     side = 1.0 if concrete["tilt"] >= 0 else -1.0  # the pivot: left corner (+1) or right corner (-1)
@@ -68,14 +68,9 @@ def make(p, concrete):
     c, s = jnp.cos(tilt), jnp.sin(tilt)
     centre = jnp.stack([-side * 0.5 * b, jnp.zeros_like(b)]) - jnp.stack([c * pivot[0] - s * pivot[1],
                                                                            s * pivot[0] + c * pivot[1]])
-    corners = jnp.stack([jnp.stack([-0.5 * b, -0.5 * hb]), jnp.stack([0.5 * b, -0.5 * hb])])  # left, right
-    inertia = m * (b**2 + hb**2) / 12.0
-    system = System(dim=2)
-    system.add_body("block", RigidBody2D(m, inertia, position=centre, angle=tilt))
-    system.add_contact("floor", PlaneContact("block", normal=[0.0, 1.0], origin=[0.0, 0.0], e=0.0, points=corners,
-                                             mu=contact_mu(p, concrete)))
-    system.add_force("gravity", Gravity(jnp.stack([jnp.zeros_like(g), -g])))
-    model = system.model()
+    model, corners = block_on_line(m, b, hb, position=centre, angle=tilt, velocity=jnp.zeros(2),
+                                   normal=jnp.array([0.0, 1.0]), mu=contact_mu(p, concrete), gravity=g,
+                                   contact="floor")
     q0, v0 = model.initial_state()
 
     def observables(sol):
