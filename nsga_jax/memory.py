@@ -3,7 +3,7 @@ whether the machine has it: checked before anything is traced or compiled.
 
 Every iteration matrix of nsga_jax is dense, n × n for a model of n
 coordinates, so a run's memory grows as n²: the flexible cube at 11
-divisions (5,184 coordinates) peaks at about 2.6 GB, at 40 divisions
+divisions (5,184 coordinates) peaks at about 2.8 GB, at 40 divisions
 (206,763 coordinates) one such matrix alone is 342 GB. :func:`dense_matrices`
 counts the n × n arrays a scheme's run holds at its peak from the same static
 structure that chooses the iteration matrices' kinds
@@ -31,16 +31,17 @@ SKIP_ENV = "NSGA_JAX_SKIP_MEMORY_CHECK"
 """Environment variable: set to ``1`` to skip :func:`check_fits` everywhere
 (the command line included)."""
 
-OVERHEAD = 1.2
+OVERHEAD = 1.15
 """Measured peak over counted dense arrays: XLA's copies around the compiled
-loops and LAPACK's work arrays (the cube's runs peak at 1.1 to 1.3 times the
-count past its runtime, docs/performance.md)."""
+loops and LAPACK's work arrays. Fitted on the flexible cube's peaks past
+:data:`RUNTIME_BYTES` at 9 to 15 divisions (3,000 to 12,288 coordinates,
+where the dense arrays dominate): 1.1 to 1.2 (docs/performance.md)."""
 
-RUNTIME_BYTES = 0.55e9
+RUNTIME_BYTES = 0.6e9
 """Resident memory of the Python process, JAX and a compiled step apart from
-the dense arrays [bytes]: the smallest cube's measured peak (0.66 GB at 192
-coordinates, of which the dense arrays are 3 MB). Already in use when the
-check runs, so it is not compared with the available memory."""
+the dense arrays [bytes]: about the smallest cube's measured peak (0.65 GB at
+192 coordinates, of which the dense arrays are 3 MB). Already in use when
+the check runs, so it is not compared with the available memory."""
 
 
 class Estimate(NamedTuple):
@@ -170,8 +171,9 @@ def skipped() -> bool:
 
 
 def gigabytes(n_bytes: float) -> str:
-    """``n_bytes`` in GB (10⁹ bytes), three significant digits."""
-    return f"{n_bytes / 1e9:.3g} GB"
+    """``n_bytes`` in GB (10⁹ bytes): three significant digits, whole GB from 100 GB."""
+    gb = n_bytes / 1e9
+    return f"{gb:,.0f} GB" if gb >= 100 else f"{gb:.3g} GB"
 
 
 def check_fits(model: Model, scheme: AbstractScheme, itemsize: int = 8, *, members: int = 1, records: int = 0,
