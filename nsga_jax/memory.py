@@ -171,9 +171,10 @@ def skipped() -> bool:
 
 
 def gigabytes(n_bytes: float) -> str:
-    """``n_bytes`` in GB (10⁹ bytes): three significant digits, whole GB from 100 GB."""
+    """``n_bytes`` in GB (10⁹ bytes): whole GB from 100 GB, one decimal from
+    1 GB, three significant digits below."""
     gb = n_bytes / 1e9
-    return f"{gb:,.0f} GB" if gb >= 100 else f"{gb:.3g} GB"
+    return f"{gb:,.0f} GB" if gb >= 100 else f"{gb:.1f} GB" if gb >= 1 else f"{gb:.3g} GB"
 
 
 def check_fits(model: Model, scheme: AbstractScheme, itemsize: int = 8, *, members: int = 1, records: int = 0,
@@ -194,17 +195,17 @@ def check_fits(model: Model, scheme: AbstractScheme, itemsize: int = 8, *, membe
     if limit is None or est.needed <= limit:
         return est
     each = f" for each of {members} runs" if members > 1 else ""
-    skip = f"(or skip this check: check_memory=False, {SKIP_ENV}=1)"
+    skip = f"; to run anyway, pass check_memory=False or set {SKIP_ENV}=1"
     if est.dense_bytes > limit:
         raise ConfigError(
             f"{what}: {gigabytes(est.dense_bytes)} estimated for {est.n_dof:,} coordinates (about {est.dense} dense "
             f"{est.n_dof:,} x {est.n_dof:,} iteration matrices, {itemsize} bytes a number{each}), "
             f"{gigabytes(limit)} available; use a smaller model (a coarser mesh, fewer divisions or elements)"
-            f"{', fewer runs at once' if members > 1 else ''} {skip}")
+            f"{' or fewer runs at once' if members > 1 else ''}{skip}")
     raise ConfigError(
         f"{what}: keeping the records of {records:,} steps needs {gigabytes(est.records_bytes)} ({record_numbers} "
         f"numbers a step{each}) beside {gigabytes(est.dense_bytes)} of dense matrices, {gigabytes(limit)} "
-        f"available; keep every k-th step (SaveAt(every=k), record_every / --record-every) or shorten the run {skip}")
+        f"available; keep every k-th step (SaveAt(every=k), record_every / --record-every) or shorten the run{skip}")
 
 
 __all__ = ["OVERHEAD", "RUNTIME_BYTES", "SKIP_ENV", "Estimate", "available_memory", "check_fits", "dense_matrices",

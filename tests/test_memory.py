@@ -15,7 +15,7 @@ from nsga_jax.cli import EXIT_INPUT, main
 from nsga_jax.scenes import load_scene
 from nsga_jax.sweep import sweep
 
-RECORDED = {3: (192, 0.65), 5: (648, 0.70), 7: (1536, 0.83), 9: (3000, 1.42), 11: (5184, 2.84)}
+RECORDED = {3: (192, 0.65), 5: (648, 0.70), 7: (1536, 0.86), 9: (3000, 1.40), 11: (5184, 2.84)}
 """divisions: (coordinates, peak resident memory [GB]) of the flexible cube,
 20 steps of DS at h = 1e-4 s with every sub-problem active
 (``experiments/tools/memory_peak.py``; the table of docs/performance.md)."""
