@@ -39,6 +39,7 @@ from jax import lax
 from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template
+from .memory import check_fits
 from .models.base import Model
 from .results import RESULTS, ConfigError, from_code
 from .run_inputs import check_scheme
@@ -156,6 +157,7 @@ def integrate(
             raise ConfigError(f"{name} must have shape ({model.n_dof},), got {np.shape(x)}")
     refuse_without_implicit_adjoint(scheme)
     dtype = jnp.result_type(*(jnp.asarray(x) for x in (q0, v0)), float)  # the precision of q0 and v0
+    check_fits(model, scheme, dtype.itemsize)  # the dense matrices of one run (static sizes; a vmap's are not seen)
     t0 = jnp.asarray(t0, dtype)
     h = jnp.asarray(h, dtype)
     q0 = jnp.asarray(q0, dtype)

@@ -36,6 +36,7 @@ from .compilation_cache import cache_events, compile_source
 from .diagnosis import FLOAT32_HINT, nonfinite_origin
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
+from .memory import check_fits
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
 from .precision import DTYPES, cast_floats, require_x64_for
@@ -43,7 +44,7 @@ from .results import RESULTS, ConvergenceError, InvariantError, Result, from_cod
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .saveat import DEVICE_ONLY, SaveAt, refuse
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import check_memory, choice, integer, require_instance, time_grid
+from .validation import choice, integer, require_instance, time_grid
 
 # --------------------------------------------------------------------- the loop
 
@@ -130,6 +131,7 @@ def simulate(
     dtype: str = "float64",
     strict: bool = False,
     tolerances: Tolerances | None = None,
+    check_memory: bool = True,
 ) -> Solution:
     """Integrate ``model`` from t0 to t1 [s] with step h [s] by ``scheme`` (host driver).
 
@@ -174,6 +176,10 @@ def simulate(
             impact step past ``tolerances.impact_energy`` (by default a
             warning in ``Solution.warnings``).
         tolerances: the monitors' bounds (:class:`~nsga_jax.monitors.Tolerances`).
+        check_memory: refuse, before compiling, a run whose dense iteration
+            matrices and kept records would not fit in the available memory
+            (:func:`~nsga_jax.memory.check_fits`); ``False`` (or the
+            environment variable ``NSGA_JAX_SKIP_MEMORY_CHECK=1``) skips it.
 
     Everything is validated before anything is traced: wrong Python types
     raise :class:`TypeError`, bad values :class:`ConfigError`.
@@ -190,7 +196,7 @@ def simulate(
     record_every = saveat.every
     if chunk_size is not None:
         chunk_size = integer("chunk_size", chunk_size, 1)
-    for name, value in (("throw", throw), ("progress", progress), ("strict", strict)):
+    for name, value in (("throw", throw), ("progress", progress), ("strict", strict), ("check_memory", check_memory)):
         require_instance(name, value, (bool, np.bool_), "True or False")
     for name, hook in (("on_chunk", on_chunk), ("observables", observables)):
         if hook is not None and not callable(hook):
@@ -198,8 +204,8 @@ def simulate(
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
     require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.monitors.Tolerances")
     template = output_template(model, np.dtype(dtype), scheme.subproblems)
-    check_memory(model.n_dof, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
-                 record_numbers=sum(packed_sizes(template)))
+    check_fits(model, scheme, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
+               record_numbers=sum(packed_sizes(template)), enabled=check_memory)
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     if saveat.chunks is not None:
         on_chunk = chunk_files(saveat.chunks, then=on_chunk)

@@ -33,13 +33,14 @@ from ._simulate import chunk_length, prepare_and_init, prepend_initial
 from .integrators.base import AbstractScheme
 from .integrators.linalg import bounded_lapack_batches
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
+from .memory import check_fits
 from .models.base import Model
 from .monitors import RunTotals
 from .precision import DTYPES, cast_floats, require_x64_for
 from .results import ConfigError, Result
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import check_memory, choice, describe, require_instance, time_grid
+from .validation import choice, describe, require_instance, time_grid
 
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
@@ -327,8 +328,8 @@ def simulate_batch(
         require_instance("mesh", mesh, Mesh, "a jax.sharding.Mesh (nsga_jax.batch.member_mesh)")
     n_steps = np.array([g[3] for g in grids])
     template = output_template(model, np.dtype(dtype), scheme.subproblems)
-    check_memory(model.n_dof, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
-                 record_numbers=sum(packed_sizes(template)), what="each run's model")
+    check_fits(model, scheme, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
+               record_numbers=sum(packed_sizes(template)), what="the batch")
     B = len(hs)
     model_c, scheme_c = cast_floats((model, scheme), dtype)
     run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),

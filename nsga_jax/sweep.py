@@ -36,6 +36,7 @@ import numpy as np
 from .batch import BatchRun, member_mesh, member_solution, same_structure, stack_models
 from .distributed import agree
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
+from .memory import check_fits
 from .metrics import relative_l1_error
 from .monitors import RunTotals
 from .precision import cast_floats
@@ -224,6 +225,11 @@ def sweep(
     padded = -(-batch_size // n_dev) * n_dev
     batches = split_batches(mems, batch_size)
     n_batches = len(batches)
+    per_device = padded if devices[0].platform == "cpu" else padded // n_dev  # host devices share one memory
+    for batch in batches:  # before any batch is compiled: each structure's dense matrices for a whole batch
+        first = batch[0].scene
+        check_fits(first.model, first.scheme(), np.dtype(first.solver["dtype"]).itemsize, members=per_device,
+                   what=f"a batch of {first.name}")
 
     out_dir = None if out is None else Path(out)
     if out_dir is not None:

@@ -13,7 +13,6 @@ and what is allowed.
 from __future__ import annotations
 
 import math
-import os
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -29,15 +28,6 @@ TIME_RESOLUTION = 2.0
 """A step must be at least this many units in the last place of the run's
 latest time in its precision: below that, ``t + h`` rounds back to ``t`` (or
 to a visibly wrong time) and the run would never advance."""
-
-DENSE_MATRICES = 10
-"""Dense n × n matrices a run holds at once (mass, tangents, the three
-iteration matrices and their factorisations, temporaries): the memory
-estimate of a model of n coordinates is ``DENSE_MATRICES n² × bytes``."""
-
-MEMORY_FRACTION = 0.8
-"""Share of the machine's memory a run may plan to use."""
-
 
 def describe(value: Any) -> str:
     """A short description of a value for an error message."""
@@ -166,50 +156,7 @@ def time_grid(t0: Any, t1: Any, h: Any, dtype: str = "float64", *, t1_name: str 
     return t0, t1, h, n_steps
 
 
-def available_memory() -> int:
-    """Bytes a run may plan to use: :data:`MEMORY_FRACTION` of the physical
-    memory of the machine (or of the first accelerator, when JAX runs on one)."""
-    try:
-        import jax
-
-        stats = jax.devices()[0].memory_stats() if jax.devices()[0].platform != "cpu" else None
-        if stats and stats.get("bytes_limit"):
-            return int(MEMORY_FRACTION * stats["bytes_limit"])
-    except Exception:  # no accelerator statistics: the host's memory is the limit
-        pass
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return 2**62
-    return int(MEMORY_FRACTION * total)
-
-
-def gigabytes(n_bytes: float) -> str:
-    return f"{n_bytes / 2**30:.3g} GiB"
-
-
-def check_memory(n_dof: int, itemsize: int, *, members: int = 1, records: int = 0,
-                 record_numbers: int = 0, what: str = "the model") -> None:
-    """Refuse a run whose dense matrices (:data:`DENSE_MATRICES` n × n per
-    member) and kept records (``records`` steps of ``record_numbers`` numbers
-    per member) would not fit in :func:`available_memory`, naming the estimate."""
-    dense = DENSE_MATRICES * n_dof**2 * itemsize * members
-    kept = (records + 1) * record_numbers * itemsize * members  # and the initial state
-    limit = available_memory()
-    if dense > limit:
-        raise ConfigError(
-            f"{what} has {n_dof} coordinates: its dense iteration matrices need about {gigabytes(dense)} "
-            f"({DENSE_MATRICES} matrices of {n_dof} x {n_dof}{f' for each of {members} runs' if members > 1 else ''}),"
-            f" more than the {gigabytes(limit)} this machine can give; use a coarser mesh")
-    if dense + kept > limit:
-        raise ConfigError(
-            f"keeping the records of {records} steps needs about {gigabytes(kept)} "
-            f"({record_numbers} numbers a step{f' for each of {members} runs' if members > 1 else ''}), more than "
-            f"the {gigabytes(limit - dense)} left; keep every k-th step (SaveAt(every=k), record_every / "
-            "--record-every) or shorten the run")
-
-
-__all__ = ["MAX_STEPS", "POSITIVE", "SCHEME_NAMES", "UNIT_INTERVAL", "Range", "check_memory", "check_model_fields",
+__all__ = ["MAX_STEPS", "POSITIVE", "SCHEME_NAMES", "UNIT_INTERVAL", "Range", "check_model_fields",
            "choice", "describe", "integer", "interval_text", "real", "require_instance", "step_count", "time_grid"]
 
 

@@ -19,7 +19,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("physics", {"elements", "assembly", "models", "system", "exact", "exact_pendulums"}),
     ("numerics", {"integrators", "adjoint", "impact_time"}),
     ("runs", {"saveat", "_integrate", "_simulate", "solution", "monitors", "diagnosis", "batch", "distributed",
-              "run_inputs", "chunks"}),
+              "run_inputs", "chunks", "memory"}),
     ("application", {"scenes", "cli", "cli_options", "bench", "sweep", "grid", "identify", "data", "studies",
                      "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
     ("package", {"__init__"}),
