@@ -24,7 +24,7 @@ def block_on_line(mass: Any, length: Any, height: Any, *, position: Any, angle: 
     system = System(dim=2)
     system.add_body("block", RigidBody2D(mass, mass * (length**2 + height**2) / 12.0, position=position, angle=angle,
                                          velocity=velocity))
-    system.add_contact(contact, PlaneContact("block", normal=normal, origin=jnp.zeros(2), e=0.0, points=corners,
-                                             mu=mu))
+    system.add_contact(contact, PlaneContact("block", normal=normal, origin=jnp.zeros(2), e=jnp.asarray(0.0),
+                                             points=corners, mu=mu))
     system.add_force("gravity", Gravity(jnp.stack([jnp.zeros_like(gravity), -gravity])))
     return system.model(), corners
