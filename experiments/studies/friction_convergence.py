@@ -22,8 +22,9 @@ Gradient table: d(d)/d(mu) = -v0²/(2 mu² g) and d(d)/d(v0) = v0/(mu g)
 against the gradient nsga_jax.integrate returns (DiscreteAdjoint and
 ImpactTimeAdjoint) and central finite differences of the same discrete run.
 
-At the stick-slip switch (v0 such that T is a step time) the switch table
-gives the distance and its gradient on both sides.
+At the stick-slip switch (v0 such that T is a step time for MJ, a half-step
+time for DS) the switch table gives the distance and its gradient on both
+sides.
 
 Writes docs/results/friction/{convergence,gradients,switch}.{csv,md};
 ``python experiments/studies/friction_convergence.py switch`` runs one part.
@@ -163,14 +164,17 @@ def gradients(n=1600, grad_steps=(2e-3, 1e-3, 5e-4)) -> list[dict]:
 
 
 def switch(h=1e-3, n=1600, k=680, delta=1e-7) -> list[dict]:
-    """The stick–slip switch: v0* = k h mu g puts T = v0/(mu g) on the step
-    time k h. On either side of v0* the run slides a different number of
-    steps; the table gives d and its gradient in v0 at v0* ± delta, and the
-    finite difference across the switch."""
+    """The stick–slip switch, where the run's number of sliding steps N grows
+    by one: for MJ where T = v0/(mu g) crosses the step time k h
+    (v0* = k h mu g), for DS where it crosses the half-step time (k + 1/2) h
+    (its position correction takes the last step's slip by the midpoint rule,
+    so the run stops in the step whose midpoint T passes). The table gives d
+    and its gradient in v0 at v0* ± delta, and the finite difference across
+    the switch."""
     rows = []
     tol = dict(tol_r=1e-12, tol_f=1e-12)
-    v_star = k * h * MU * G
-    for name, scheme in (("DS", nsga_jax.DS(**tol)), ("MJ", nsga_jax.MJ(**tol))):
+    for name, scheme, steps in (("DS", nsga_jax.DS(**tol), k + 0.5), ("MJ", nsga_jax.MJ(**tol), k)):
+        v_star = steps * h * MU * G
         value = jax.jit(lambda p: final_x(p, h, scheme, nsga_jax.DiscreteAdjoint(), n))
         grad = jax.jit(jax.grad(lambda p: final_x(p, h, scheme, nsga_jax.DiscreteAdjoint(), n)))
         below, above = jnp.array([MU, v_star - delta]), jnp.array([MU, v_star + delta])
