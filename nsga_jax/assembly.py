@@ -104,6 +104,16 @@ class ElementGroup(eqx.Module):
         Ce = -_vmapped_jacobian(fn, 1)(xe, ve, self.params)
         return K, scatter_matrix(self.dofs, Ce, n)
 
+    def stiffness_blocks(self, force: ElementForce, q: Vector, n: int) -> "ElementMatrix":
+        """K(q) = -d(force)/dq element by element, from element-level ``jacfwd``
+        (a force that does not depend on v), never assembled."""
+        xe = self.gather(q)
+        return ElementMatrix(-_vmapped_jacobian(force, 0)(xe, jnp.zeros_like(xe), self.params), self.dofs, n)
+
+    def matrix_blocks(self, fn: Callable[[Any], jax.Array], n: int) -> "ElementMatrix":
+        """The element matrices ``fn(params_e)`` (e.g. mass), never assembled."""
+        return ElementMatrix(jax.vmap(fn)(self.params), self.dofs, n)
+
     def matrix_product(self, fn: Callable[[Any], jax.Array], x: Vector) -> Vector:
         """Assembled ``sum_e fn(params_e) @ x_e`` without forming the global matrix."""
         ye = jax.vmap(lambda p, xe: fn(p) @ xe)(self.params, self.gather(x))
@@ -175,3 +185,109 @@ def scatter_matrix(dofs: StaticIndex, values: jax.Array, n: int) -> Matrix:
     dense = jnp.swapaxes(skewed, 0, 1).reshape(n_nodes * s, n_nodes * s)
     tail = n - offset - n_nodes * s
     return jnp.pad(dense, [(offset, tail), (offset, tail)])
+
+
+# ------------------------------------------------------------ never assembled
+
+
+@functools.lru_cache(maxsize=32)
+def _entry_ids(dofs: StaticIndex) -> tuple[np.ndarray, int]:
+    """For every entry (e, i, j) of a group's element matrices, the number of
+    the global entry (dofs[e, i], dofs[e, j]) it adds into, among the distinct
+    ones, shape (E * k * k,), and how many distinct entries there are."""
+    idx = dofs.array.astype(np.int64)
+    n = int(idx.max()) + 1 if idx.size else 0
+    flat = (idx[:, :, None] * n + idx[:, None, :]).ravel()
+    _, ids = np.unique(flat, return_inverse=True)
+    return ids.astype(np.int32), int(ids.max()) + 1 if ids.size else 0
+
+
+class ElementMatrix(eqx.Module):
+    """A global matrix Σ_e scatter(dofs_e, blocks_e) kept as its element
+    blocks and never assembled: a product is a gather, one small product
+    per element and a scatter-add, O(E k²) multiply-adds and storage.
+
+    Attributes:
+        blocks: element matrices, shape (E, k, k).
+        dofs: element-to-dof map, shape (E, k) (static).
+        n: the global size (static).
+    """
+
+    blocks: jax.Array
+    dofs: StaticIndex = eqx.field(static=True)
+    n: int = eqx.field(static=True)
+
+    def combine(self, a, other: "ElementMatrix", b) -> "ElementMatrix":
+        """``a self + b other`` (the same elements)."""
+        return ElementMatrix(a * self.blocks + b * other.blocks, self.dofs, self.n)
+
+    def mv(self, x: Vector) -> Vector:
+        """The product with x, shape (n,) -> (n,)."""
+        ye = jnp.einsum("eij,ej->ei", self.blocks, x[self.dofs.array])
+        return scatter_vector(self.dofs, ye, self.n)
+
+    def diagonal(self) -> Vector:
+        """The assembled diagonal, shape (n,)."""
+        return scatter_vector(self.dofs, jnp.diagonal(self.blocks, axis1=1, axis2=2), self.n)
+
+    def frobenius_norm(self) -> jax.Array:
+        """The assembled matrix's Frobenius norm, exactly: the element entries
+        are summed into the distinct global entries they add into first."""
+        ids, count = _entry_ids(self.dofs)
+        entries = jax.ops.segment_sum(self.blocks.reshape(-1), jnp.asarray(ids), num_segments=count)
+        return jnp.linalg.norm(entries)
+
+    def dense(self) -> Matrix:
+        """The assembled matrix (n, n), for checks on small models."""
+        return scatter_matrix(self.dofs, self.blocks, self.n)
+
+
+class NodeRows(eqx.Module):
+    """Constraint rows (m, n) each supported on a few coordinates (one node's):
+    row i is ``vals[i]`` on the columns ``cols[i]``. ``G @ x``, ``G.T @ y`` and
+    ``abs(G)`` read as for a dense array, so the sub-problems use either.
+
+    Attributes:
+        vals: the rows' values, shape (m, w).
+        cols: their columns, shape (m, w) (static).
+        n: the number of coordinates (static).
+    """
+
+    vals: jax.Array
+    cols: StaticIndex = eqx.field(static=True)
+    n: int = eqx.field(static=True)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.vals.shape[0], self.n)
+
+    def __matmul__(self, x: Vector) -> jax.Array:
+        return jnp.sum(self.vals * x[self.cols.array], axis=-1)
+
+    def __abs__(self) -> "NodeRows":
+        return NodeRows(jnp.abs(self.vals), self.cols, self.n)
+
+    @property
+    def T(self) -> "_TransposedRows":
+        return _TransposedRows(self)
+
+    def orthonormal(self) -> bool:
+        """Whether no two rows share a column (static), so that rows of unit
+        norm are orthonormal."""
+        cols = self.cols.array.ravel()
+        return len(np.unique(cols)) == len(cols)
+
+    def dense(self) -> Matrix:
+        """The rows as a dense (m, n) array, for checks on small models."""
+        m = self.vals.shape[0]
+        return jnp.zeros((m, self.n), self.vals.dtype).at[np.arange(m)[:, None], self.cols.array].add(self.vals)
+
+
+class _TransposedRows(eqx.Module):
+    """``G.T`` of :class:`NodeRows`: ``G.T @ y`` scatters y (m,) into (n,)."""
+
+    rows: NodeRows
+
+    def __matmul__(self, y: jax.Array) -> Vector:
+        r = self.rows
+        return jnp.zeros((r.n,), r.vals.dtype).at[r.cols.array].add(r.vals * y[:, None])

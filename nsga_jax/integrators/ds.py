@@ -38,6 +38,7 @@ from .base import (
 from .coefficients import GenAlphaCoefficients
 from .friction import projection_start
 from .iteration_matrix import Held
+from .krylov import KRYLOV_MIN_DOF, KrylovOperator, linear_tolerance
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
@@ -110,10 +111,17 @@ class DS(AbstractGenAlpha):
             (modified Newton, :func:`~nsga_jax.integrators.newton.newton`);
             smaller models refactor at every iteration, which costs them less
             than the bookkeeping. Static.
+        krylov_min_dof: with fast paths on, a matrix-free model
+            (:attr:`~nsga_jax.models.Model.matrix_free`) of at least this many
+            coordinates assembles no matrix: its iteration matrices are
+            element blocks solved by preconditioned conjugate gradients to a
+            tenth of eq. 51's tolerance (:mod:`~nsga_jax.integrators.krylov`).
+            ``None``: never. Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
     reuse_min_dof: int = eqx.field(static=True, default=100, kw_only=True)
+    krylov_min_dof: int | None = eqx.field(static=True, default=KRYLOV_MIN_DOF, kw_only=True)
 
     name = "ds"
     subproblems = ("smooth", "position", "velocity")
@@ -126,7 +134,14 @@ class DS(AbstractGenAlpha):
         between iterations and steps in models of at least ``reuse_min_dof``
         coordinates, refactored at every iteration in smaller ones."""
         return matrix_kinds(model, needs_constant_G=(True, True, False), enabled=self.fast_paths,
-                            hold=model.n_dof >= self.reuse_min_dof)
+                            hold=model.n_dof >= self.reuse_min_dof, krylov=self.matrix_free(model),
+                            holds_stiffness=(True, self.nonsmooth_forces, False))
+
+    def matrix_free(self, model: Model) -> bool:
+        """Whether a run of ``model`` assembles no matrix (static): fast paths,
+        a matrix-free model and at least ``krylov_min_dof`` coordinates."""
+        return (self.fast_paths and self.krylov_min_dof is not None and model.matrix_free
+                and model.n_dof >= self.krylov_min_dof)
 
     def reused(self, model: Model) -> tuple[bool, bool, bool]:
         """Which sub-problems (smooth, position, velocity) keep a factorisation
@@ -136,6 +151,14 @@ class DS(AbstractGenAlpha):
         return kinds[0].is_held, kinds[1].is_held, kinds[2].is_held
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
+        if self.matrix_free(model):  # v̇̃_0 by conjugate gradients on M's element blocks
+            real = jnp.result_type(q0, float)
+            q0, v0 = jnp.asarray(q0, real), jnp.asarray(v0, real)
+            M = model.element_mass(q0)
+            solve = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real),
+                                      linear_tolerance(self.tol_r, real)).solve
+            vd0 = consistent_acceleration(model, t0, q0, v0, solve)
+            return StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
         state = super().init(model, t0, q0, v0)
         reused = self.reused(model)
         if not any(reused):
@@ -152,7 +175,7 @@ class DS(AbstractGenAlpha):
             (lambda M, K, C: c_vd * M + C + c_q * K,  # eq. 50, S_t^{s*}
              (lambda M, K, C: M + h**2 * K) if with_forces else (lambda M, K, C: M),  # S_t^{p*}
              (lambda M, K, C: M + h * C) if with_forces else (lambda M, K, C: M)),  # S_t^{v*}
-            enabled=self.fast_paths,
+            enabled=self.fast_paths, tol_r=self.tol_r,
         )
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:

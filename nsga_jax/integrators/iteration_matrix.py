@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Callable
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -45,6 +45,11 @@ BuildMatrix = Callable[[], tuple[Matrix, Scalar, Scalar]]
 """``() -> (A, ||K||, ||C||)``: a sub-problem's top-left block at the current
 iterate and the Frobenius norms of the tangents it holds (evaluated only by
 the kinds that are not constant)."""
+
+BuildElements = Callable[[], tuple[Any, Scalar, Scalar]]
+"""``() -> (A, ||K||, ||C||)``: a sub-problem's top-left block as element
+blocks (:class:`~nsga_jax.assembly.ElementMatrix`), for the kinds that never
+assemble it (:mod:`~nsga_jax.integrators.krylov`)."""
 
 
 class AbstractIterationMatrix(eqx.Module):
@@ -60,9 +65,10 @@ class AbstractIterationMatrix(eqx.Module):
     is_held: ClassVar[bool] = False
 
     @abc.abstractmethod
-    def factored(self, build: BuildMatrix) -> AbstractFactorisation:
+    def factored(self, build: BuildMatrix, elements: BuildElements | None = None) -> AbstractFactorisation:
         """What a Newton correction at the current iterate solves with;
-        ``build`` gives A there (called only when A is not constant)."""
+        ``build`` gives A there (called only when A is not constant), and
+        ``elements`` its element blocks (a matrix-free model's sub-problems)."""
 
 
 class _AbstractConstant(AbstractIterationMatrix, AbstractFactorisation):
@@ -75,7 +81,7 @@ class _AbstractConstant(AbstractIterationMatrix, AbstractFactorisation):
     inverse_Gt: eqx.AbstractVar[jax.Array | None]
     is_constant: ClassVar[bool] = True
 
-    def factored(self, build: BuildMatrix) -> AbstractFactorisation:
+    def factored(self, build: BuildMatrix, elements: BuildElements | None = None) -> AbstractFactorisation:
         return self
 
     def solve_with_constraints(self, rhs: Vector, G: jax.Array) -> tuple[Vector, jax.Array]:
@@ -140,7 +146,7 @@ class Refactored(AbstractIterationMatrix):
 
     is_constant: ClassVar[bool] = False
 
-    def factored(self, build: BuildMatrix) -> AbstractFactorisation:
+    def factored(self, build: BuildMatrix, elements: BuildElements | None = None) -> AbstractFactorisation:
         return Factorisation.of(*build())
 
 
@@ -152,7 +158,7 @@ class Held(AbstractIterationMatrix):
     is_constant: ClassVar[bool] = False
     is_held: ClassVar[bool] = True
 
-    def factored(self, build: BuildMatrix) -> AbstractFactorisation:
+    def factored(self, build: BuildMatrix, elements: BuildElements | None = None) -> AbstractFactorisation:
         return Factorisation.of(*build())
 
     @staticmethod

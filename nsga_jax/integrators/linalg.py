@@ -260,6 +260,12 @@ class AbstractFactorisation(eqx.Module):
         sol = self.solve(jnp.concatenate([rhs[:, None], G.T], axis=1))
         return sol[:, 0], sol[:, 1:]
 
+    def bordered(self, r1: Vector, r2: jax.Array, G_up: jax.Array, G_low: jax.Array, active: ActiveSet,
+                 k: Scalar, p: Scalar) -> tuple[Vector, jax.Array]:
+        """The Newton correction (dx, dmu) of the bordered system with this
+        top-left block (:func:`solve_bordered`)."""
+        return solve_bordered(self, r1, r2, G_up, G_low, active, k, p)
+
 
 class Factorisation(AbstractFactorisation):
     """The LU factors of an iteration matrix's top-left block A, for the

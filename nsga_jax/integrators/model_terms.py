@@ -12,6 +12,7 @@ object holds only what the model's structure makes constant.
 from __future__ import annotations
 
 import abc
+from collections.abc import Callable
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
@@ -20,6 +21,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
 from ..models.base import Model
+from ..assembly import ElementMatrix, NodeRows
 from .linalg import band_product
 
 # ------------------------------------------------------------------------- mass
@@ -79,6 +81,28 @@ class ConstantMass(AbstractMass):
 
     def product(self, model: Model, q: Vector, x: Vector) -> Vector:
         return model.mass_product(q, x)
+
+    def norm(self, model: Model, q: Vector) -> Scalar:
+        return self.M_norm
+
+
+class ElementMass(AbstractMass):
+    """A constant M kept as element blocks (a matrix-free model), never assembled.
+
+    Attributes:
+        M: the mass matrix's element blocks (:class:`~nsga_jax.assembly.ElementMatrix`, n × n).
+        M_norm: its Frobenius norm.
+    """
+
+    M: ElementMatrix
+    M_norm: Scalar
+    is_constant: ClassVar[bool] = True
+
+    def matrix(self, model: Model, q: Vector) -> Matrix:
+        raise TypeError("a matrix-free model's mass is never assembled")
+
+    def product(self, model: Model, q: Vector, x: Vector) -> Vector:
+        return self.M.mv(x)
 
     def norm(self, model: Model, q: Vector) -> Scalar:
         return self.M_norm
@@ -256,6 +280,24 @@ class VaryingJacobian(AbstractConstraintJacobian):
         return model.bilateral_jacobian(q)
 
 
+class RowsJacobian(AbstractConstraintJacobian):
+    """The constant g_q of a matrix-free model's affine constraints as
+    node-local rows (:class:`~nsga_jax.assembly.NodeRows`), without bilaterals.
+
+    Attributes:
+        G: g_q, (nc, n) as rows.
+    """
+
+    G: NodeRows
+    is_constant: ClassVar[bool] = True
+
+    def jacobian(self, model: Model, q: Vector) -> NodeRows:  # type: ignore[override]
+        return self.G
+
+    def bilateral(self, model: Model, q: Vector) -> jax.Array:
+        return jnp.zeros((0, self.G.n), q.dtype)
+
+
 class ConstantJacobian(AbstractConstraintJacobian):
     """The constant g_q of affine constraints, evaluated once.
 
@@ -301,12 +343,17 @@ def restitution(model: Model, dtype) -> jax.Array:
     return jnp.concatenate([jnp.zeros((model.n_bilateral,), dtype), jnp.asarray(model.restitution, dtype)])
 
 
-def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector) -> Vector:
+def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector,
+                            mass_solve: Callable[[Vector], Vector] | None = None) -> Vector:
     """v̇̃_0 from the equations of motion with the bilateral constraints at
-    acceleration level, unilateral constraints ignored (Algorithm 1, line 2)."""
-    M = model.mass(q0)
+    acceleration level, unilateral constraints ignored (Algorithm 1, line 2).
+    ``mass_solve``: x -> M^{-1} x where M is never assembled (a model without
+    bilateral constraints)."""
     f = model.force(q0, v0, t0)
     nb = model.n_bilateral
+    if mass_solve is not None and nb == 0:
+        return mass_solve(f)
+    M = model.mass(q0)
     if nb == 0:
         return jnp.linalg.solve(M, f)
     GB = jax.jacfwd(model.bilateral)(q0)

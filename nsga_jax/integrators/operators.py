@@ -27,6 +27,7 @@ from .iteration_matrix import (
     Held,
     Refactored,
 )
+from .krylov import KRYLOV_KINDS, KrylovConstant, KrylovFresh, KrylovOperator, linear_tolerance
 from .linalg import band_matrix
 from .model_terms import (
     AbstractConstraintJacobian,
@@ -36,8 +37,10 @@ from .model_terms import (
     BandedMass,
     ConstantJacobian,
     ConstantMass,
+    ElementMass,
     LinearForce,
     NonlinearForce,
+    RowsJacobian,
     VaryingJacobian,
     VaryingMass,
 )
@@ -83,7 +86,8 @@ def banded(model: Model) -> bool:
 
 def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
                  present: tuple[bool, bool, bool] = (True, True, True), enabled: bool = True,
-                 hold: bool = False) -> MatrixKinds:
+                 hold: bool = False, krylov: bool = False,
+                 holds_stiffness: tuple[bool, bool, bool] = (True, True, False)) -> MatrixKinds:
     """The kinds of the smooth, position and velocity iteration matrices,
     from the model's static structure alone (no array is evaluated).
 
@@ -95,6 +99,12 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
     between iterations and steps when ``hold``. ``present``: the scheme has
     that sub-problem (the position and velocity ones only with constraints).
     ``enabled=False`` (the generic path) refactors everything.
+
+    ``krylov`` (a :attr:`~nsga_jax.models.Model.matrix_free` model only):
+    no matrix is assembled (:mod:`~nsga_jax.integrators.krylov`); a block is
+    constant when it holds no stiffness (``holds_stiffness``: the velocity
+    jump's M + h C with C = 0) or the force is linear, else evaluated as
+    element blocks at every iteration.
     """
     nb, nc = model.n_bilateral, model.n_constraints
     present = (present[0], present[1] and nc > 0, present[2] and nc > 0)
@@ -102,6 +112,11 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
     constant_G = model.linear_constraints and nc > 0
     linear = enabled and model.constant_mass and model.linear_force
     tridiagonal = banded(model) and model.bandwidth == 1
+
+    if krylov and enabled and model.matrix_free:
+        return tuple(  # type: ignore[return-value]
+            (KrylovConstant if (model.linear_force or not stiff) else KrylovFresh) if p else Refactored
+            for p, stiff in zip(present, holds_stiffness))
 
     def kind(is_present: bool, needs_G: bool) -> type[AbstractIterationMatrix]:
         if is_present and linear and (constant_G or not needs_G):
@@ -119,7 +134,7 @@ def generic_operators() -> Operators:
 
 def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
                       top_lefts: tuple[TopLeft | None, TopLeft | None, TopLeft | None],
-                      enabled: bool = True) -> Operators:
+                      enabled: bool = True, tol_r: Scalar | None = None) -> Operators:
     """Evaluate what the model's structure makes constant (M, K and C, g_q,
     their bands) and factorise the iteration matrices that ``kinds`` (from
     :func:`matrix_kinds`) say are constant, from their ``top_lefts``
@@ -127,9 +142,14 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
     not have). The smooth block couples only to the bilateral rows of g_q,
     the others to all rows, and the velocity one, with friction, to the
     tangential rows g_T too. ``enabled=False``: :func:`generic_operators`.
+    Kinds that are never assembled (:mod:`~nsga_jax.integrators.krylov`,
+    solving to eq. 51's ``tol_r``) get :func:`matrix_free_operators`.
     """
     if not enabled:
         return generic_operators()
+    if any(issubclass(kind, KRYLOV_KINDS) for kind in kinds):
+        assert tol_r is not None, "solving without assembling needs eq. 51's tol_r"
+        return matrix_free_operators(model, t0, kinds, top_lefts, tol_r)
     n, nb, nc = model.n_dof, model.n_bilateral, model.n_constraints
     real = jnp.result_type(t0, float)  # the run's precision, that of t0 (float32 or float64)
     zeros = jnp.zeros((n,), real)
@@ -169,4 +189,37 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
                                   for kind, top_left, rows, tangential
                                   in zip(kinds, top_lefts, (nb, nc, nc), (False, False, True)))
     return Operators(mass=mass, force=force, constraints=constraints,
+                     smooth=smooth, position=position, velocity=velocity)
+
+
+def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
+                          top_lefts: tuple[TopLeft | None, TopLeft | None, TopLeft | None],
+                          tol_r: Scalar) -> Operators:
+    """A matrix-free model's operators: its mass as element blocks, its rows
+    node by node, the constant blocks as element blocks with their
+    preconditioners. A top-left block A = top_left(M, K, C) is linear in its
+    arguments, so its coefficients are read off by evaluating it on numbers."""
+    real = jnp.result_type(t0, float)
+    zeros = jnp.zeros((model.n_dof,), real)
+    M = model.element_mass(zeros)
+    rtol = linear_tolerance(tol_r, real)
+    constraints: AbstractConstraintJacobian = VaryingJacobian()
+    if model.n_constraints:
+        G = model.constraint_rows(zeros)
+        assert G.orthonormal(), "a matrix-free model's rows share no coordinate"
+        constraints = RowsJacobian(G)
+
+    def build(kind: type[AbstractIterationMatrix], top_left: TopLeft | None) -> AbstractIterationMatrix:
+        if kind is KrylovFresh:
+            return KrylovFresh(rtol)
+        if kind is not KrylovConstant:
+            return kind()
+        assert top_left is not None
+        c_m, c_k = top_left(1.0, 0.0, 0.0), top_left(0.0, 1.0, 0.0)  # type: ignore[arg-type]
+        K = model.element_stiffness(zeros) if model.linear_force else M.combine(0.0, M, 0.0)
+        zero = jnp.zeros((), real)
+        return KrylovConstant(KrylovOperator.of(M.combine(c_m, K, c_k), K.frobenius_norm(), zero, rtol))
+
+    smooth, position, velocity = (build(kind, top_left) for kind, top_left in zip(kinds, top_lefts))
+    return Operators(mass=ElementMass(M, M.frobenius_norm()), force=NonlinearForce(), constraints=constraints,
                      smooth=smooth, position=position, velocity=velocity)

@@ -54,7 +54,7 @@ def constraint_floor(k: Scalar, G: jax.Array, x: Vector) -> Scalar:
     violation. Negligible in float64 against eq. 51's bound; in float32 it is
     what lets a converged projection pass the test."""
     eps = jnp.finfo(x.dtype).eps
-    return ROUNDOFF_FACTOR * eps * k * jnp.linalg.norm(jnp.abs(G) @ jnp.abs(x))
+    return ROUNDOFF_FACTOR * eps * k * jnp.linalg.norm(abs(G) @ jnp.abs(x))
 
 
 def augmented_residual(inertia, force, G, c, mu, k, p, candidates, unilateral, tol_r, tol_f) -> Residual:

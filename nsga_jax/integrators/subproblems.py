@@ -36,7 +36,7 @@ from .._custom_types import Scalar, Vector
 from ..models.base import Model
 from .coefficients import GenAlphaCoefficients
 from .friction import FrictionLaw, has_friction, velocity_rows
-from .linalg import solve_bordered
+from .krylov import element_top_left
 from .model_terms import ForceAt, convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound
 from .operators import Operators
@@ -98,7 +98,10 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
             Ks = K + model.inertia_stiffness(q, vd) - curvature(model, q, pad_bilateral(model, res.aux))
             return c_vd * ops.mass.matrix(model, q) + C + c_q * Ks, K_norm, C_norm
 
-        return ops.smooth.factored(matrix)
+        def elements():  # the same block, element by element (a matrix-free model)
+            return element_top_left(model, ops, state(x[0])[2], c_vd, c_q)
+
+        return ops.smooth.factored(matrix, elements)
 
     def correct(x, res, matrix):
         vt, lam = x
@@ -111,7 +114,7 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
         GB = ops.constraints.bilateral(model, q)
         floor = floor + constraint_floor(ks, GB, vt)
         G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
-        dv, dlam = solve_bordered(matrix, res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool), ks, ps)
+        dv, dlam = matrix.bordered(res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool), ks, ps)
         return (dv, dlam), floor
 
     return Problem(residual, linearise, correct)
@@ -194,7 +197,10 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
                 A = A + h**2 * K
             return A - curvature(model, q, mu), K_norm, C_norm
 
-        return ops.position.factored(matrix)
+        def elements():  # M + h² K element by element (a matrix-free model: affine constraints)
+            return element_top_left(model, ops, smooth.q + x[0], 1.0, h**2 if with_forces else 0.0)
+
+        return ops.position.factored(matrix, elements)
 
     def correct(x, res, matrix):
         U, nu = x
@@ -208,7 +214,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             G_all = jnp.concatenate([G, GT])
             dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q))
             return (dU, dnu), floor
-        dU, dnu = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kp, pp)
+        dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp)
         return (dU, dnu), floor
 
     return Problem(residual, linearise, correct, line_search=law is not None)
@@ -290,7 +296,7 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if law is not None:
             dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted)
             return (dW, dLam), floor
-        dW, dLam = solve_bordered(matrix, res.r[:n], res.r[n:], G, G, active, kv, pv)
+        dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv)
         return (dW, dLam), floor
 
     return Problem(residual, linearise, correct, line_search=law is not None)

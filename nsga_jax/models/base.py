@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ..assembly import ElementMatrix, NodeRows
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
 from ..results import ConfigError
 from ..validation import Range, integer
@@ -134,6 +135,29 @@ class Model(eqx.Module):
         it from the element-to-dof map (the bar's test checks its band against
         the assembled M and K)."""
         return None
+
+    @property
+    def matrix_free(self) -> bool:
+        """``True`` when the model gives its iteration matrices as element
+        blocks (:meth:`element_mass`, :meth:`element_stiffness`) and its constraint rows node by node
+        (:meth:`constraint_rows`), so that a large model is solved without
+        forming any n × n or (nc, n) array (:mod:`~nsga_jax.integrators.krylov`).
+        Such a model has a constant mass, a force that does not depend on v,
+        affine constraints without bilaterals, no friction, and rows of unit
+        norm no two of which share a coordinate."""
+        return False
+
+    def element_mass(self, q: Vector) -> ElementMatrix:
+        """M(q) as element blocks, never assembled (matrix-free models)."""
+        raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
+
+    def element_stiffness(self, q: Vector) -> ElementMatrix:
+        """K(q) = -df/dq as element blocks, never assembled (matrix-free models)."""
+        raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
+
+    def constraint_rows(self, q: Vector) -> NodeRows:
+        """g_q(q) as node-local rows (matrix-free models), shape (nc, n)."""
+        raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
 
     @property
     @abc.abstractmethod

@@ -23,7 +23,8 @@ import jax.numpy as jnp
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
 from ..models.base import Model
-from . import layout
+from ..assembly import ElementMatrix, NodeRows
+from . import layout, matrix_free
 from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint
 from .forces import Gravity
 from .groups import call, gather, scatter_block, scatter_vector, shift
@@ -115,6 +116,19 @@ class SystemModel(Model):
         if any(f.depends_on_state(layout.bodies_of(self, f)) for f in self.forces):
             return None
         return max(b for b in bands if b is not None)
+
+    @property
+    def matrix_free(self) -> bool:
+        return matrix_free.is_matrix_free(self)
+
+    def element_mass(self, q: Vector) -> ElementMatrix:
+        return matrix_free.element_mass(self, q)
+
+    def element_stiffness(self, q: Vector) -> ElementMatrix:
+        return matrix_free.element_stiffness(self, q)
+
+    def constraint_rows(self, q: Vector) -> NodeRows:
+        return matrix_free.constraint_rows(self, q)
 
     @property
     def mbar(self) -> Scalar:

@@ -13,7 +13,7 @@ import numpy as np
 
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
-from ..assembly import ElementGroup, StaticIndex
+from ..assembly import ElementMatrix, ElementGroup, StaticIndex
 from ..elements.hex8 import (
     hex8_body_force,
     hex8_geometry,
@@ -152,6 +152,18 @@ class HexSolid(AbstractBody):
 
     def tangents(self, q: Vector, v: Vector) -> tuple[Matrix, Matrix]:
         return self.elements.tangents(hex8_internal_force, q, v, self.n_dof, velocity_dependent=False)
+
+    def element_mass(self, q: Vector) -> ElementMatrix:
+        """M element by element (never assembled)."""
+        return self.elements.matrix_blocks(hex8_mass, self.n_dof)
+
+    def element_stiffness(self, q: Vector) -> ElementMatrix:
+        """K(q) element by element (never assembled)."""
+        return self.elements.stiffness_blocks(hex8_internal_force, q, self.n_dof)
+
+    def node_dofs(self, nodes: tuple[int, ...]) -> np.ndarray:
+        """The coordinates (k, 3) of the nodes ``nodes`` (static): x, y, z of each."""
+        return 3 * (np.asarray(nodes)[:, None] % self.n_nodes) + np.arange(3)
 
     def strain_energy(self, q: Vector) -> Scalar:
         group = self.elements
