@@ -101,6 +101,14 @@ def _constrained(M: jax.Array, G: jax.Array, rows: jax.Array, y: Vector, target:
     return y + Minv_Gt @ mu
 
 
+def dense_jacobian(model: Model, ops: Operators, q: Vector) -> jax.Array:
+    """g_q(q) as a dense (nc, n) array: the rebuild assembles M and g_q, also
+    for a model whose run keeps its rows node by node (a matrix-free model:
+    impact-time derivatives are then for sizes whose M fits in memory)."""
+    G = ops.constraints.jacobian(model, q)
+    return G if isinstance(G, jax.Array) else model.constraint_jacobian(q)
+
+
 def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput, h: Scalar,
                  closing: jax.Array) -> tuple[Vector, Vector]:
     """(q, v) at t_n + h from the continuous-time rebuild of an impact step (see module)."""
@@ -109,7 +117,7 @@ def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput
     tau = impact_instant(model, q, v, a, h, closing)
     q_hit = q + tau * v + 0.5 * tau**2 * a
     v_minus = v + tau * a
-    G = ops.constraints.jacobian(model, q_hit)
+    G = dense_jacobian(model, ops, q_hit)
     M = model.mass(q_hit)
     e = restitution(model, q.dtype)
     joints = ~is_unilateral(model)
@@ -129,7 +137,7 @@ def with_impact_time_sensitivity(model: Model, ops: Operators, state: StepState,
     contact closes, the derivative of :func:`rebuilt_step` in place of the
     scheme's derivative of (q, v). ``was_active``: the previous step's velocity
     active set on the contacts (nu,)."""
-    G_n = ops.constraints.jacobian(model, state.q)
+    G_n = dense_jacobian(model, ops, state.q)
     closing = lax.stop_gradient(closing_contacts(model, G_n, state, out, was_active))
     any_closing = jnp.any(closing)
 

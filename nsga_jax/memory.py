@@ -1,8 +1,9 @@
 """How much memory a run needs, from the model's structure alone, and
 whether the machine has it: checked before anything is traced or compiled.
 
-Every iteration matrix of nsga_jax is dense, n × n for a model of n
-coordinates, so a run's memory grows as n²: the flexible cube at 11
+The iteration matrices are dense, n × n for a model of n coordinates,
+except where a large matrix-free model is solved without assembling them
+(:mod:`~nsga_jax.integrators.krylov`), so a run's memory grows as n²: the flexible cube at 11
 divisions (5,184 coordinates) peaks at about 2.8 GB, at 40 divisions
 (206,763 coordinates) one such matrix alone is 342 GB. :func:`dense_matrices`
 counts the n × n arrays a scheme's run holds at its peak from the same static
@@ -14,6 +15,8 @@ peaks (docs/performance.md, ``experiments/tools/memory_peak.py``);
 :func:`available_memory` with a :class:`~nsga_jax.ConfigError`. Setting the
 environment variable :data:`SKIP_ENV` (``NSGA_JAX_SKIP_MEMORY_CHECK=1``), or
 ``check_memory=False`` where an entry point takes it, skips the check.
+A run that assembles nothing holds element blocks and vectors instead,
+:func:`matrix_free_numbers`, linear in n.
 """
 
 from __future__ import annotations
@@ -54,6 +57,8 @@ class Estimate(NamedTuple):
         members: runs held at once (a batch's members; 1 for one run).
         dense_bytes: ``OVERHEAD * dense * n² * itemsize * members`` [bytes].
         records_bytes: the kept records [bytes].
+        blocks_bytes: element blocks and vectors of a run that assembles no
+            matrix (:func:`matrix_free_numbers`) [bytes].
     """
 
     n_dof: int
@@ -62,11 +67,17 @@ class Estimate(NamedTuple):
     members: int
     dense_bytes: int
     records_bytes: int
+    blocks_bytes: int = 0
+
+    @property
+    def arrays_bytes(self) -> int:
+        """Bytes of the run's matrices: dense arrays, or element blocks and vectors."""
+        return self.dense_bytes + self.blocks_bytes
 
     @property
     def needed(self) -> int:
-        """Bytes the run adds to the process: dense arrays and records."""
-        return self.dense_bytes + self.records_bytes
+        """Bytes the run adds to the process: matrices and records."""
+        return self.arrays_bytes + self.records_bytes
 
     @property
     def total(self) -> int:
@@ -96,6 +107,8 @@ def dense_matrices(model: Model, scheme: AbstractScheme) -> int:
     from .integrators.iteration_matrix import ConstantInverse
 
     kinds = [k for k, p in zip(scheme.matrix_kinds(model), _present(model, scheme)) if p]
+    if _assembles_nothing(kinds):
+        return 0
     count = int(model.constant_mass) + 2 * int(model.linear_force)
     count += sum(1 for k in kinds if issubclass(k, ConstantInverse)) + 2 * sum(1 for k in kinds if k.is_held)
     if any(not k.is_constant for k in kinds):
@@ -104,6 +117,37 @@ def dense_matrices(model: Model, scheme: AbstractScheme) -> int:
     elif kinds:
         count += 2
     return max(count, 1)
+
+
+BLOCK_COPIES = 6
+"""Element-block arrays (E × k × k numbers each) a run that assembles no
+matrix holds at its peak: the mass, the stiffness and the combined block of
+a fresh iteration matrix, a constant one, and XLA's temporaries."""
+
+VECTOR_COPIES = 60
+"""Vectors of n numbers the same run holds: state, predictor, residuals and
+conjugate-gradient work vectors of three sub-problems."""
+
+
+def _assembles_nothing(kinds) -> bool:
+    from .integrators.krylov import KRYLOV_KINDS
+
+    return bool(kinds) and all(issubclass(k, KRYLOV_KINDS) for k in kinds)
+
+
+def matrix_free_numbers(model: Model, scheme: AbstractScheme) -> int:
+    """Numbers a run that assembles no matrix (:mod:`~nsga_jax.integrators.krylov`)
+    holds at its peak, per member: :data:`BLOCK_COPIES` arrays of element
+    blocks (their size from ``jax.eval_shape``, nothing evaluated) and
+    :data:`VECTOR_COPIES` vectors; 0 for a run with dense matrices."""
+    kinds = [k for k, p in zip(scheme.matrix_kinds(model), _present(model, scheme)) if p]
+    if not _assembles_nothing(kinds):
+        return 0
+    import jax
+    import jax.numpy as jnp
+
+    blocks = jax.eval_shape(model.element_mass, jax.ShapeDtypeStruct((model.n_dof,), jnp.float32)).blocks
+    return BLOCK_COPIES * blocks.size + VECTOR_COPIES * model.n_dof
 
 
 def _present(model: Model, scheme: AbstractScheme) -> tuple[bool, bool, bool]:
@@ -131,7 +175,8 @@ def estimate_run_bytes(model: Model, scheme: AbstractScheme, itemsize: int = 8, 
     dense = dense_matrices(model, scheme)
     dense_bytes = int(OVERHEAD * dense * n * n * itemsize * members)
     records_bytes = (records + 1) * record_numbers * itemsize * members if records else 0
-    return Estimate(n, dense, itemsize, members, dense_bytes, records_bytes)
+    blocks_bytes = int(OVERHEAD * matrix_free_numbers(model, scheme) * itemsize * members)
+    return Estimate(n, dense, itemsize, members, dense_bytes, records_bytes, blocks_bytes)
 
 
 def available_memory() -> int | None:
@@ -196,6 +241,11 @@ def check_fits(model: Model, scheme: AbstractScheme, itemsize: int = 8, *, membe
         return est
     each = f" for each of {members} runs" if members > 1 else ""
     skip = f"; to run anyway, pass check_memory=False or set {SKIP_ENV}=1"
+    if est.blocks_bytes > limit:
+        raise ConfigError(
+            f"{what}: {gigabytes(est.blocks_bytes)} estimated for {est.n_dof:,} coordinates (element blocks and "
+            f"vectors, no matrix assembled, {itemsize} bytes a number{each}), {gigabytes(limit)} available; use a "
+            f"smaller model{' or fewer runs at once' if members > 1 else ''}{skip}")
     if est.dense_bytes > limit:
         raise ConfigError(
             f"{what}: {gigabytes(est.dense_bytes)} estimated for {est.n_dof:,} coordinates (about {est.dense} dense "
@@ -204,9 +254,9 @@ def check_fits(model: Model, scheme: AbstractScheme, itemsize: int = 8, *, membe
             f"{' or fewer runs at once' if members > 1 else ''}{skip}")
     raise ConfigError(
         f"{what}: keeping the records of {records:,} steps needs {gigabytes(est.records_bytes)} ({record_numbers} "
-        f"numbers a step{each}) beside {gigabytes(est.dense_bytes)} of dense matrices, {gigabytes(limit)} "
+        f"numbers a step{each}) beside {gigabytes(est.arrays_bytes)} of matrices, {gigabytes(limit)} "
         f"available; keep every k-th step (SaveAt(every=k), record_every / --record-every) or shorten the run{skip}")
 
 
 __all__ = ["OVERHEAD", "RUNTIME_BYTES", "SKIP_ENV", "Estimate", "available_memory", "check_fits", "dense_matrices",
-           "estimate_run_bytes", "skipped"]
+           "estimate_run_bytes", "matrix_free_numbers", "skipped"]

@@ -62,6 +62,31 @@ def hex8_internal_force(x_e: jax.Array, v_e: jax.Array, p) -> jax.Array:
     return -jax.grad(svk_energy)(x_e, p)
 
 
+def hex8_stiffness(x_e: jax.Array, p) -> jax.Array:
+    """Tangent stiffness K_e = -d(internal force)/dx_e = d²U/dx_e², shape (24, 24) [N/m],
+    in closed form: with F and S = λ tr(E) I + 2μ E at each Gauss point and
+    g_a = F ∇N_a,
+
+        K[a i, b k] = Σ_gp dV (δ_ik ∇N_a·S ∇N_b + λ g_ai g_bk + μ (F Fᵀ)_ik ∇N_a·∇N_b + μ g_bi g_ak),
+
+    the geometric and the material parts. The same matrix as ``jax.jacfwd``
+    of :func:`hex8_internal_force`, in about a tenth of its work."""
+    dNdX, dV, lam, mu, _ = p
+    F = jnp.einsum("ai,gaj->gij", x_e.reshape(8, 3), dNdX)
+    C = jnp.einsum("gki,gkj->gij", F, F)
+    E = 0.5 * (C - jnp.eye(3, dtype=F.dtype))
+    S = lam * jnp.trace(E, axis1=1, axis2=2)[:, None, None] * jnp.eye(3, dtype=F.dtype) + 2.0 * mu * E
+    g = jnp.einsum("gij,gaj->gai", F, dNdX)  # F ∇N_a
+    geometric = jnp.einsum("g,gaj,gjl,gbl->ab", dV, dNdX, S, dNdX)
+    grad_dot = jnp.einsum("gaj,gbj->gab", dNdX, dNdX)
+    FFt = jnp.einsum("gij,gkj->gik", F, F)
+    K = (jnp.einsum("ab,ik->aibk", geometric, jnp.eye(3, dtype=F.dtype))
+         + lam * jnp.einsum("g,gai,gbk->aibk", dV, g, g)
+         + mu * jnp.einsum("g,gik,gab->aibk", dV, FFt, grad_dot)
+         + mu * jnp.einsum("g,gbi,gak->aibk", dV, g, g))
+    return K.reshape(24, 24)
+
+
 def _gauss_shape_functions(dtype) -> jax.Array:
     return jax.vmap(shape_functions)(jnp.asarray(GAUSS_POINTS, dtype))  # (gp, a)
 

@@ -37,7 +37,6 @@ from .base import (
 )
 from .coefficients import GenAlphaCoefficients
 from .friction import projection_start
-from .iteration_matrix import Held
 from .krylov import KRYLOV_MIN_DOF, KrylovOperator, linear_tolerance
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
@@ -151,20 +150,24 @@ class DS(AbstractGenAlpha):
         return kinds[0].is_held, kinds[1].is_held, kinds[2].is_held
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
+        state = None
         if self.matrix_free(model):  # v̇̃_0 by conjugate gradients on M's element blocks
             real = jnp.result_type(q0, float)
             q0, v0 = jnp.asarray(q0, real), jnp.asarray(v0, real)
-            M = model.element_mass(q0)
+            M = model.element_mass(q0).node_blocks()
             solve = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real),
                                       linear_tolerance(self.tol_r, real)).solve
             vd0 = consistent_acceleration(model, t0, q0, v0, solve)
-            return StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
-        state = super().init(model, t0, q0, v0)
+            state = StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
+        if state is None:
+            state = super().init(model, t0, q0, v0)
         reused = self.reused(model)
         if not any(reused):
             return state
-        empty = Held.empty(model.n_dof, state.q.dtype)
-        return dataclasses.replace(state, factorisations=tuple(empty if r else None for r in reused))
+        kinds = self.matrix_kinds(model)
+        return dataclasses.replace(state, factorisations=tuple(
+            kind.empty_like(model, state.q.dtype) if kind.is_held else None  # type: ignore[attr-defined]
+            for kind in kinds))
 
     def prepare(self, model: Model, h: Scalar, t0: Scalar) -> Operators:
         co = self.coefficients

@@ -110,7 +110,7 @@ class ConstantInverse(_AbstractConstant):
         inverse = jnp.linalg.inv(A)
         return cls(inverse=inverse, inverse_Gt=None if G is None else inverse @ G.T, K_norm=K_norm, C_norm=C_norm)
 
-    def solve(self, rhs: jax.Array) -> jax.Array:
+    def solve(self, rhs: jax.Array, bound: Scalar | None = None) -> jax.Array:
         return self.inverse @ rhs
 
 
@@ -137,7 +137,7 @@ class ConstantTridiagonal(_AbstractConstant):
         return cls(elimination=elimination, inverse_Gt=None if G is None else elimination.solve(G.T),
                    K_norm=K_norm, C_norm=C_norm)
 
-    def solve(self, rhs: jax.Array) -> jax.Array:
+    def solve(self, rhs: jax.Array, bound: Scalar | None = None) -> jax.Array:
         return self.elimination.solve(rhs)
 
 
@@ -165,3 +165,8 @@ class Held(AbstractIterationMatrix):
     def empty(n: int, dtype) -> Factorisation:
         """The factorisation a run starts with (nothing factored yet)."""
         return Factorisation.empty(n, dtype)
+
+    @staticmethod
+    def empty_like(model, dtype) -> Factorisation:
+        """:meth:`empty` for ``model``'s n coordinates."""
+        return Factorisation.empty(model.n_dof, dtype)

@@ -23,12 +23,15 @@ which is what :func:`~nsga_jax.integrators.linalg.solve_bordered` gives, by
 one conjugate-gradient solve on the range of P whatever the number of
 active contacts (no Schur complement is formed).
 
-**Tolerance.** Each solve stops at ||A d - b|| <= η ||b|| with
-η = max(κ tol_r, 64 eps), κ = 0.1: in a Newton update b is the residual,
-whose norm is at most the sum of the terms of eq. 51's bound, so the linear
-error of an update is at most a tenth of the convergence test, and Newton,
-which evaluates the residual exactly, ends on an iterate that passes eq. 51
-as the dense path's does.
+**Tolerance.** A Newton update's solve stops at ||A d - b|| <= κ B, κ = 0.1,
+with B eq. 51's bound at the iterate (b is the residual there): the linear
+error of an update is a tenth of the convergence test, so Newton, which
+evaluates the residual exactly, ends on an iterate that passes eq. 51 as
+the dense path's does, and a nearly linear sub-problem converges in one
+update. Relative to ||b|| the tolerance is kept within [η, 0.1],
+η = max(κ tol_r, 64 eps) (B >= tol_r ||b||, so η never tightens an update);
+the derivative's solves (the implicit tangent at the solution,
+:func:`~nsga_jax.integrators.newton.solve`) stop at η.
 """
 
 from __future__ import annotations
@@ -36,13 +39,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import ClassVar
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.sparse.linalg as jsp
 
-from .._custom_types import ActiveSet, Scalar, Vector
-from ..assembly import ElementMatrix, NodeRows
+from .._custom_types import ActiveSet, Scalar, ScalarLike, Vector
+from ..blocks import NodeBlockMatrix, NodeRows
 from ..models.base import Model
 from .iteration_matrix import AbstractIterationMatrix, BuildElements, BuildMatrix
 from .linalg import AbstractFactorisation
@@ -55,10 +57,14 @@ KRYLOV_MIN_DOF: int | None = None
 """The size from which DS solves a matrix-free model without assembling
 (:attr:`~nsga_jax.integrators.ds.DS.krylov_min_dof`); ``None``: only when asked."""
 
+MAX_FORCING = 0.1
+"""The loosest relative residual of a linear solve (the first updates of a
+Newton iteration far from its solution)."""
+
 MAX_STEPS = 1000
 """The most conjugate-gradient steps of one solve (a mass-dominated block needs 20-70)."""
 
-def linear_tolerance(tol_r, dtype) -> jax.Array:
+def linear_tolerance(tol_r: ScalarLike, dtype) -> jax.Array:
     """η = max(κ tol_r, 64 eps): the relative residual each linear solve stops at."""
     return jnp.maximum(KAPPA * jnp.asarray(tol_r, dtype), 64 * jnp.finfo(dtype).eps)
 
@@ -72,38 +78,51 @@ def cg(matvec: Callable[[Vector], Vector], b: Vector, precondition: Callable[[Ve
 
 
 class KrylovOperator(AbstractFactorisation):
-    """A top-left block A as element blocks, solved by preconditioned conjugate gradients.
+    """A top-left block A as node blocks, solved by preconditioned conjugate gradients.
 
     Attributes:
-        A: the block, :class:`~nsga_jax.assembly.ElementMatrix` (n × n, never assembled).
+        A: the block, :class:`~nsga_jax.blocks.NodeBlockMatrix` (n × n, never assembled).
         inverse_diagonal: 1 / diag(A), shape (n,) (the preconditioner).
         rtol: η, the relative residual each solve stops at (:func:`linear_tolerance`).
         K_norm, C_norm: Frobenius norms of the tangents A was built from (round-off floor).
+        valid: False for the placeholder a run with a held operator starts with.
     """
 
-    A: ElementMatrix
+    A: NodeBlockMatrix
     inverse_diagonal: Vector
     rtol: Scalar
     K_norm: Scalar
     C_norm: Scalar
+    valid: jax.Array
 
     @classmethod
-    def of(cls, A: ElementMatrix, K_norm: Scalar, C_norm: Scalar, rtol: Scalar) -> "KrylovOperator":
-        return cls(A=A, inverse_diagonal=1.0 / A.diagonal(), rtol=rtol, K_norm=K_norm, C_norm=C_norm)
+    def of(cls, A: NodeBlockMatrix, K_norm: Scalar, C_norm: Scalar, rtol: Scalar) -> "KrylovOperator":
+        return cls(A=A, inverse_diagonal=1.0 / A.diagonal(), rtol=jnp.asarray(rtol, A.blocks.dtype),
+                   K_norm=K_norm, C_norm=C_norm, valid=jnp.ones((), bool))
 
-    def solve(self, rhs: jax.Array) -> jax.Array:
+    def forcing(self, b: Vector, bound: Scalar | None) -> Scalar:
+        """The relative residual a solve with right-hand side b stops at:
+        κ bound / ||b|| (so that the update's linear error is a tenth of eq.
+        51's bound, module docstring), within [η, :data:`MAX_FORCING`]; η
+        without a bound."""
+        if bound is None:
+            return self.rtol
+        norm = jnp.maximum(jnp.linalg.norm(b), jnp.finfo(b.dtype).tiny)
+        return jnp.clip(KAPPA * bound / norm, self.rtol, MAX_FORCING)
+
+    def solve(self, rhs: jax.Array, bound: Scalar | None = None) -> jax.Array:
         """``A^{-1} rhs`` for rhs (n,) (or (n, m): one solve per column)."""
         if rhs.ndim == 2:
-            return jax.vmap(self.solve, in_axes=1, out_axes=1)(rhs)
-        return cg(self.A.mv, rhs, lambda r: self.inverse_diagonal * r, self.rtol)
+            return jax.vmap(lambda b: self.solve(b), in_axes=1, out_axes=1)(rhs)
+        return cg(self.A.mv, rhs, lambda r: self.inverse_diagonal * r, self.forcing(rhs, bound))
 
     def bordered(self, r1: Vector, r2: jax.Array, G_up, G_low, active: ActiveSet, k: Scalar,
-                 p: Scalar) -> tuple[Vector, jax.Array]:
+                 p: Scalar, bound: Scalar | None = None) -> tuple[Vector, jax.Array]:
         """The bordered correction (dx, dμ) by projection on the inactive
         coordinates (module docstring); the rows must be orthonormal
         :class:`~nsga_jax.assembly.NodeRows` (checked when the run is prepared)."""
         if not isinstance(G_up, NodeRows) or G_up is not G_low:
-            return super().bordered(r1, r2, G_up, G_low, active, k, p)
+            return super().bordered(r1, r2, G_up, G_low, active, k, p, bound)
         G = NodeRows(jnp.where(active[:, None], G_up.vals, 0.0), G_up.cols, G_up.n)  # G_a, zero rows inactive
 
         def project(x):  # P x = x - G_aᵀ G_a x
@@ -114,7 +133,7 @@ class KrylovOperator(AbstractFactorisation):
         def on_range(apply):  # P B P + (I - P): SPD, and P B P on the range of P
             return lambda x: project(apply(project(x))) + (x - project(x))
 
-        z = cg(on_range(self.A.mv), b, on_range(lambda r: self.inverse_diagonal * r), self.rtol)
+        z = cg(on_range(self.A.mv), b, on_range(lambda r: self.inverse_diagonal * r), self.forcing(b, bound))
         dx = fixed + project(z)
         dmu = jnp.where(active, (G @ (self.A.mv(dx) + r1)) / k, 0.0) + (p / k**2) * r2
         return dx, dmu
@@ -136,6 +155,24 @@ class KrylovFresh(AbstractIterationMatrix):
         return KrylovOperator.of(*elements(), rtol=self.rtol)
 
 
+class KrylovHeld(KrylovFresh):
+    """A's element blocks held between iterations and steps and rebuilt when
+    an update made with them converges too slowly: modified Newton, as
+    :class:`~nsga_jax.integrators.iteration_matrix.Held`, with an operator
+    in place of LU factors (:func:`~nsga_jax.integrators.newton.newton`)."""
+
+    is_held: ClassVar[bool] = True
+
+    @staticmethod
+    def empty_like(model: Model, dtype) -> KrylovOperator:
+        """The operator a run starts with (nothing built yet): zero blocks in the model's node layout."""
+        M = model.element_mass(jnp.zeros((model.n_dof,), dtype)).node_blocks()
+        zero = jnp.zeros((), dtype)
+        blocks = M.combine(0.0, M, 0.0)
+        return KrylovOperator(A=blocks, inverse_diagonal=jnp.zeros((model.n_dof,), dtype), rtol=zero,
+                              K_norm=zero, C_norm=zero, valid=jnp.zeros((), bool))
+
+
 class KrylovConstant(AbstractIterationMatrix):
     """A constant A (constant mass, linear force) as element blocks, built
     once per step size and solved by conjugate gradients.
@@ -151,14 +188,14 @@ class KrylovConstant(AbstractIterationMatrix):
         return self.operator
 
 
-def element_top_left(model: Model, ops, q: Vector, c_m, c_k) -> tuple[ElementMatrix, Scalar, Scalar]:
-    """``c_m M + c_k K(q)`` as element blocks, with ||K|| and ||C|| = 0 (the
+def element_top_left(model: Model, ops, q: Vector, c_m, c_k) -> tuple[NodeBlockMatrix, Scalar, Scalar]:
+    """``c_m M + c_k K(q)`` as node blocks, with ||K|| and ||C|| = 0 (the
     round-off floor): a matrix-free sub-problem's top-left block (eqs. 47-49
     with a constant mass, affine constraints and no damping)."""
     assert isinstance(ops.mass, ElementMass), "element blocks need a matrix-free model's operators"
-    K = model.element_stiffness(q)
+    K = model.element_stiffness(q).node_blocks()
     return ops.mass.M.combine(c_m, K, c_k), K.frobenius_norm(), jnp.zeros((), q.dtype)
 
 
 KRYLOV_KINDS = (KrylovFresh, KrylovConstant)
-"""The kinds of iteration matrices that are never assembled."""
+"""The kinds of iteration matrices that are never assembled (a held one is a fresh one's subclass)."""

@@ -250,8 +250,10 @@ class AbstractFactorisation(eqx.Module):
     C_norm: eqx.AbstractVar[Scalar]
 
     @abc.abstractmethod
-    def solve(self, rhs: jax.Array) -> jax.Array:
-        """``A^{-1} rhs`` for rhs of shape (n,) or (n, m)."""
+    def solve(self, rhs: jax.Array, bound: Scalar | None = None) -> jax.Array:
+        """``A^{-1} rhs`` for rhs of shape (n,) or (n, m). ``bound``: eq. 51's
+        bound at the iterate, which an iterative solve may leave a fraction
+        of as its residual (a factorisation solves exactly and ignores it)."""
 
     def solve_with_constraints(self, rhs: Vector, G: jax.Array) -> tuple[Vector, jax.Array]:
         """``(A^{-1} rhs, A^{-1} G^T)`` for rhs (n,) and G (m, n): one solve
@@ -261,9 +263,9 @@ class AbstractFactorisation(eqx.Module):
         return sol[:, 0], sol[:, 1:]
 
     def bordered(self, r1: Vector, r2: jax.Array, G_up: jax.Array, G_low: jax.Array, active: ActiveSet,
-                 k: Scalar, p: Scalar) -> tuple[Vector, jax.Array]:
+                 k: Scalar, p: Scalar, bound: Scalar | None = None) -> tuple[Vector, jax.Array]:
         """The Newton correction (dx, dmu) of the bordered system with this
-        top-left block (:func:`solve_bordered`)."""
+        top-left block (:func:`solve_bordered`; ``bound`` as in :meth:`solve`)."""
         return solve_bordered(self, r1, r2, G_up, G_low, active, k, p)
 
 
@@ -295,7 +297,7 @@ class Factorisation(AbstractFactorisation):
         return cls(lu=jnp.zeros((n, n), dtype), pivots=jnp.zeros((n,), jnp.int32), K_norm=zero, C_norm=zero,
                    valid=jnp.zeros((), bool))
 
-    def solve(self, rhs: jax.Array) -> jax.Array:
+    def solve(self, rhs: jax.Array, bound: Scalar | None = None) -> jax.Array:
         """``A^{-1} rhs`` for rhs of shape (n,) or (n, m)."""
         return lu_solve(self.lu, self.pivots, rhs)
 

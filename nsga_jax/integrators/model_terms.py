@@ -20,8 +20,8 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
+from ..blocks import NodeBlockMatrix, NodeRows
 from ..models.base import Model
-from ..assembly import ElementMatrix, NodeRows
 from .linalg import band_product
 
 # ------------------------------------------------------------------------- mass
@@ -90,11 +90,11 @@ class ElementMass(AbstractMass):
     """A constant M kept as element blocks (a matrix-free model), never assembled.
 
     Attributes:
-        M: the mass matrix's element blocks (:class:`~nsga_jax.assembly.ElementMatrix`, n × n).
+        M: the mass matrix as node blocks (:class:`~nsga_jax.blocks.NodeBlockMatrix`, n × n).
         M_norm: its Frobenius norm.
     """
 
-    M: ElementMatrix
+    M: NodeBlockMatrix
     M_norm: Scalar
     is_constant: ClassVar[bool] = True
 

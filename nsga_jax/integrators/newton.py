@@ -293,7 +293,9 @@ def _implicit_newton_jvp(primals, tangents, *, max_iter):
     # right-hand side, so its jvp is the linear map itself)
     _, t_r = jax.jvp(lambda d: residual_at(d, x_star).r, (diff,), (t_args,))
     problem = builder(*args)
-    _, (t_x, _) = jax.jvp(lambda r: problem.update(x_star, res._replace(r=r)), (res.r,), (t_r,))
+    # (a zero bound: an iterative linear solve gives its tightest tolerance to the tangent)
+    zero_bound = jnp.zeros_like(res.bound)
+    _, (t_x, _) = jax.jvp(lambda r: problem.update(x_star, res._replace(r=r, bound=zero_bound)), (res.r,), (t_r,))
     _, t_aux = eqx.filter_jvp(lambda d, x: residual_at(d, x).aux, (diff, x_star), (t_args, t_x))
     t_sol = NewtonResult(x=t_x, aux=t_aux, iterations=None, converged=None, residual_norm=None, tolerance=None,
                          factorisation=jax.tree_util.tree_map(lambda _: None, sol.factorisation))

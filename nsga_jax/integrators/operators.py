@@ -17,7 +17,7 @@ from collections.abc import Callable
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Matrix, Scalar
+from .._custom_types import Matrix, Scalar, ScalarLike
 from ..models.base import Model
 from .friction import velocity_rows
 from .iteration_matrix import (
@@ -27,7 +27,7 @@ from .iteration_matrix import (
     Held,
     Refactored,
 )
-from .krylov import KRYLOV_KINDS, KrylovConstant, KrylovFresh, KrylovOperator, linear_tolerance
+from .krylov import KRYLOV_KINDS, KrylovConstant, KrylovFresh, KrylovHeld, KrylovOperator, linear_tolerance
 from .linalg import band_matrix
 from .model_terms import (
     AbstractConstraintJacobian,
@@ -104,7 +104,7 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
     no matrix is assembled (:mod:`~nsga_jax.integrators.krylov`); a block is
     constant when it holds no stiffness (``holds_stiffness``: the velocity
     jump's M + h C with C = 0) or the force is linear, else evaluated as
-    element blocks at every iteration.
+    element blocks at every iteration, or held when ``hold``.
     """
     nb, nc = model.n_bilateral, model.n_constraints
     present = (present[0], present[1] and nc > 0, present[2] and nc > 0)
@@ -115,7 +115,8 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
 
     if krylov and enabled and model.matrix_free:
         return tuple(  # type: ignore[return-value]
-            (KrylovConstant if (model.linear_force or not stiff) else KrylovFresh) if p else Refactored
+            (KrylovConstant if (model.linear_force or not stiff) else KrylovHeld if hold else KrylovFresh)
+            if p else Refactored
             for p, stiff in zip(present, holds_stiffness))
 
     def kind(is_present: bool, needs_G: bool) -> type[AbstractIterationMatrix]:
@@ -134,7 +135,7 @@ def generic_operators() -> Operators:
 
 def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
                       top_lefts: tuple[TopLeft | None, TopLeft | None, TopLeft | None],
-                      enabled: bool = True, tol_r: Scalar | None = None) -> Operators:
+                      enabled: bool = True, tol_r: ScalarLike | None = None) -> Operators:
     """Evaluate what the model's structure makes constant (M, K and C, g_q,
     their bands) and factorise the iteration matrices that ``kinds`` (from
     :func:`matrix_kinds`) say are constant, from their ``top_lefts``
@@ -194,14 +195,14 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
 
 def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
                           top_lefts: tuple[TopLeft | None, TopLeft | None, TopLeft | None],
-                          tol_r: Scalar) -> Operators:
+                          tol_r: ScalarLike) -> Operators:
     """A matrix-free model's operators: its mass as element blocks, its rows
     node by node, the constant blocks as element blocks with their
     preconditioners. A top-left block A = top_left(M, K, C) is linear in its
     arguments, so its coefficients are read off by evaluating it on numbers."""
     real = jnp.result_type(t0, float)
     zeros = jnp.zeros((model.n_dof,), real)
-    M = model.element_mass(zeros)
+    M = model.element_mass(zeros).node_blocks()
     rtol = linear_tolerance(tol_r, real)
     constraints: AbstractConstraintJacobian = VaryingJacobian()
     if model.n_constraints:
@@ -210,13 +211,13 @@ def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
         constraints = RowsJacobian(G)
 
     def build(kind: type[AbstractIterationMatrix], top_left: TopLeft | None) -> AbstractIterationMatrix:
-        if kind is KrylovFresh:
-            return KrylovFresh(rtol)
+        if kind in (KrylovFresh, KrylovHeld):
+            return kind(rtol)
         if kind is not KrylovConstant:
             return kind()
         assert top_left is not None
         c_m, c_k = top_left(1.0, 0.0, 0.0), top_left(0.0, 1.0, 0.0)  # type: ignore[arg-type]
-        K = model.element_stiffness(zeros) if model.linear_force else M.combine(0.0, M, 0.0)
+        K = model.element_stiffness(zeros).node_blocks() if model.linear_force else M.combine(0.0, M, 0.0)
         zero = jnp.zeros((), real)
         return KrylovConstant(KrylovOperator.of(M.combine(c_m, K, c_k), K.frobenius_norm(), zero, rtol))
 

@@ -110,7 +110,7 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
         floor = roundoff_floor(1.0, matrix.K_norm, matrix.C_norm, q, v,
                                c_vd * ops.mass.norm(model, q) * jnp.linalg.norm(vt))
         if nb == 0:
-            return (-matrix.solve(res.r), jnp.zeros((0,), vt.dtype)), floor
+            return (-matrix.solve(res.r, res.bound), jnp.zeros((0,), vt.dtype)), floor
         GB = ops.constraints.bilateral(model, q)
         floor = floor + constraint_floor(ks, GB, vt)
         G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
@@ -214,7 +214,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             G_all = jnp.concatenate([G, GT])
             dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q))
             return (dU, dnu), floor
-        dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp)
+        dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp, res.bound)
         return (dU, dnu), floor
 
     return Problem(residual, linearise, correct, line_search=law is not None)
@@ -296,7 +296,7 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if law is not None:
             dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted)
             return (dW, dLam), floor
-        dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv)
+        dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv, res.bound)
         return (dW, dLam), floor
 
     return Problem(residual, linearise, correct, line_search=law is not None)

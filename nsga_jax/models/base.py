@@ -29,8 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ..assembly import ElementMatrix, NodeRows
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
+from ..blocks import ElementMatrix, NodeRows
 from ..results import ConfigError
 from ..validation import Range, integer
 

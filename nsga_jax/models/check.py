@@ -43,8 +43,9 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
     ``constant_mass``, ``linear_force`` (K and C the same at every state),
     ``velocity_dependent_force=False`` (no ∂f/∂v), ``linear_constraints``
     (the same g_q at every state) and a declared ``bandwidth`` (M and K zero
-    outside the band), and with friction its structure (normal rows,
-    coefficients, the tangent Jacobian's shape).
+    outside the band), with friction its structure (normal rows,
+    coefficients, the tangent Jacobian's shape), and for a ``matrix_free``
+    model its element blocks and node rows against M, K and g_q.
 
     Args:
         q, v: the state to sample around, shape (n,) (default zeros).
@@ -122,6 +123,9 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
     if model.n_friction:
         _check_friction(model, [qs for qs, _ in states], fail)
         checked.append("friction")
+    if model.matrix_free:
+        _check_matrix_free(model, states, masses, stiffness, jacobians, fail)
+        checked.append("matrix_free")
     b = model.bandwidth
     if b is not None:
         outside = np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > b
@@ -131,6 +135,32 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
                 fail("bandwidth", f"declared {b}, but {name} has entries up to {worst:.3g} outside that band")
         checked.append("bandwidth")
     return checked
+
+
+def _check_matrix_free(model: Model, states, masses, stiffness, jacobians, fail) -> None:
+    """A matrix-free model's element blocks and node rows against its dense
+    M, K and g_q, and the structure the iterative path relies on: a constant
+    mass, no damping, affine constraints, no bilaterals, no friction, rows
+    that share no coordinate and have unit norm."""
+    for flag, ok in (("constant_mass", model.constant_mass),
+                     ("velocity_dependent_force", not model.velocity_dependent_force),
+                     ("linear_constraints", model.linear_constraints or model.n_constraints == 0),
+                     ("n_bilateral", model.n_bilateral == 0), ("n_friction", model.n_friction == 0)):
+        if not ok:
+            fail("matrix_free", f"declared True, but {flag} rules it out")
+    for (qs, _), M, K in zip(states, masses, stiffness):
+        for name, blocks, dense in (("element_mass", model.element_mass(qs), M),
+                                    ("element_stiffness", model.element_stiffness(qs), K)):
+            for form in (blocks, blocks.node_blocks()):
+                if _differ(form.dense(), dense) > 1e-6:
+                    fail(name, f"its blocks differ from the assembled matrix by {_differ(form.dense(), dense):.2e} "
+                               "(relative)")
+    if jacobians:
+        rows = model.constraint_rows(states[0][0])
+        if _differ(rows.dense(), jacobians[0]) > RELATIVE:
+            fail("constraint_rows", f"differ from g_q by {_differ(rows.dense(), jacobians[0]):.2e} (relative)")
+        if not rows.orthonormal() or np.abs(np.linalg.norm(np.asarray(rows.vals), axis=1) - 1.0).max() > RELATIVE:
+            fail("constraint_rows", "must have unit norm and share no coordinate (one contact a node)")
 
 
 def _check_friction(model: Model, qs, fail) -> None:

@@ -9,8 +9,17 @@ import numpy as np
 
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
-from ..assembly import ElementGroup, ElementMatrix, NodeRows, StaticIndex
-from ..elements.hex8 import hex8_body_force, hex8_geometry, hex8_internal_force, hex8_mass, lame, svk_energy
+from ..assembly import ElementGroup, StaticIndex
+from ..blocks import ElementMatrix, NodeRows
+from ..elements.hex8 import (
+    hex8_body_force,
+    hex8_geometry,
+    hex8_internal_force,
+    hex8_mass,
+    hex8_stiffness,
+    lame,
+    svk_energy,
+)
 from ..validation import POSITIVE, UNIT_INTERVAL, Range
 from .base import Model
 
@@ -124,11 +133,13 @@ class HexSolid(Model):
 
     def element_mass(self, q: Vector) -> ElementMatrix:
         """M element by element (never assembled)."""
-        return self.elements.matrix_blocks(hex8_mass, self.n_dof)
+        group = self.elements
+        return ElementMatrix(jax.vmap(hex8_mass)(group.params), group.dofs, self.n_dof, 3)
 
     def element_stiffness(self, q: Vector) -> ElementMatrix:
         """K(q) element by element (never assembled)."""
-        return self.elements.stiffness_blocks(hex8_internal_force, q, self.n_dof)
+        group = self.elements
+        return ElementMatrix(jax.vmap(hex8_stiffness)(group.gather(q), group.params), group.dofs, self.n_dof, 3)
 
     def constraint_rows(self, q: Vector) -> NodeRows:
         """The floor's rows: +1 on each contact node's z."""

@@ -17,7 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Vector
-from ..assembly import ElementMatrix, NodeRows, StaticIndex
+from ..assembly import StaticIndex
+from ..blocks import ElementMatrix, NodeRows
 from . import layout
 from .contacts import PlaneContact, node_indices
 

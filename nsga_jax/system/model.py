@@ -22,8 +22,8 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
+from ..blocks import ElementMatrix, NodeRows
 from ..models.base import Model
-from ..assembly import ElementMatrix, NodeRows
 from . import layout, matrix_free
 from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint
 from .forces import Gravity

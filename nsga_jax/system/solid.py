@@ -13,12 +13,14 @@ import numpy as np
 
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
-from ..assembly import ElementMatrix, ElementGroup, StaticIndex
+from ..assembly import ElementGroup, StaticIndex
+from ..blocks import ElementMatrix
 from ..elements.hex8 import (
     hex8_body_force,
     hex8_geometry,
     hex8_internal_force,
     hex8_mass,
+    hex8_stiffness,
     lame,
     structured_hex_mesh,
     svk_energy,
@@ -155,11 +157,13 @@ class HexSolid(AbstractBody):
 
     def element_mass(self, q: Vector) -> ElementMatrix:
         """M element by element (never assembled)."""
-        return self.elements.matrix_blocks(hex8_mass, self.n_dof)
+        group = self.elements
+        return ElementMatrix(jax.vmap(hex8_mass)(group.params), group.dofs, self.n_dof, 3)
 
     def element_stiffness(self, q: Vector) -> ElementMatrix:
         """K(q) element by element (never assembled)."""
-        return self.elements.stiffness_blocks(hex8_internal_force, q, self.n_dof)
+        group = self.elements
+        return ElementMatrix(jax.vmap(hex8_stiffness)(group.gather(q), group.params), group.dofs, self.n_dof, 3)
 
     def node_dofs(self, nodes: tuple[int, ...]) -> np.ndarray:
         """The coordinates (k, 3) of the nodes ``nodes`` (static): x, y, z of each."""
