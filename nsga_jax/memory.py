@@ -119,10 +119,12 @@ def dense_matrices(model: Model, scheme: AbstractScheme) -> int:
     return max(count, 1)
 
 
-BLOCK_COPIES = 6
+BLOCK_COPIES = 23
 """Element-block arrays (E × k × k numbers each) a run that assembles no
-matrix holds at its peak: the mass, the stiffness and the combined block of
-a fresh iteration matrix, a constant one, and XLA's temporaries."""
+matrix holds at its peak, XLA's temporaries of the stiffness rebuild
+included: fitted on the cube's measured peaks past :data:`RUNTIME_BYTES`
+at 20, 25 and 30 divisions (26 times the element blocks' bytes at each,
+with :data:`OVERHEAD`; docs/performance.md, "Large models")."""
 
 VECTOR_COPIES = 60
 """Vectors of n numbers the same run holds: state, predictor, residuals and

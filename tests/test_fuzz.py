@@ -192,7 +192,7 @@ def test_output_paths_that_cannot_be_folders_are_named(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, match", [
-    (["run", "flexible_cube", "--set", "divisions=40"],
+    (["run", "flexible_cube", "--set", "divisions=40", "--scheme", "mj"],
      r"flexible_cube: .* GB estimated for 206,763 coordinates .* available; use a smaller"),
     (["run", "impacting_bar", "--set", "n_elements=100000"], r"impacting_bar: .* GB estimated for 100,001 coordinates"),
     (["run", "bouncing_ball", "--h", "1e-300"], r"below the time resolution"),

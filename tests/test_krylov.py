@@ -224,7 +224,8 @@ def test_no_n_by_n_array_is_formed():
         return max(sum(1 for d in s if d >= n) for s in shapes)
 
     assert largest(dataclasses.replace(scene.scheme(), krylov_min_dof=0)) <= 1
-    assert largest(scene.scheme()) == 2
+    assert largest(dataclasses.replace(scene.scheme(), krylov_min_dof=None)) == 2
+    assert scene.scheme().matrix_kinds(model)[0] is KrylovHeld  # 1,029 coordinates: matrix-free by default
 
 
 def _equations(jaxpr):
@@ -247,3 +248,15 @@ def test_memory_estimate_of_the_matrix_free_path_is_linear():
     assert large.needed < 10e9  # 206,763 coordinates in a few GB (the dense path: thousands)
     dense = estimate_run_bytes(load_scene("flexible_cube", {"divisions": 40}).model, nsga_jax.DS(krylov_min_dof=None))
     assert dense.needed > 100 * large.needed
+
+
+def test_a_large_cube_that_cannot_fit_is_refused_naming_the_matrix_free_path(tmp_path, capsys, monkeypatch):
+    from nsga_jax import memory
+    from nsga_jax.cli import main
+
+    monkeypatch.delenv(memory.SKIP_ENV, raising=False)
+    monkeypatch.setattr(memory, "available_memory", lambda: 0.5e9)
+    code = main(["run", "flexible_cube", "--set", "divisions=40", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and err[-1].startswith("error: ")
+    assert "206,763 coordinates (element blocks and vectors, no matrix assembled" in err[-1]

@@ -21,13 +21,16 @@ RECORDED = {3: (192, 0.65), 5: (648, 0.70), 7: (1536, 0.86), 9: (3000, 1.40), 11
 (``experiments/tools/memory_peak.py``; the table of docs/performance.md)."""
 
 BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.5)
-CUBE_40 = r"flexible_cube: 3,9\d\d GB estimated for 206,763 coordinates .*21.3 GB available; use a smaller model"
+CUBE_40 = r"flexible_cube: 1,[0-9]\d\d GB estimated for 206,763 coordinates .*21.3 GB available; use a smaller model"
+DENSE = nj.DS(krylov_min_dof=None)
+"""DS on its dense path (a large cube is otherwise solved without assembling: test_krylov.py)."""
 
 
 @pytest.fixture(scope="module")
 def cube_40():
-    """The flexible cube at its largest mesh (model only: nothing is compiled)."""
-    return load_scene("flexible_cube", {"divisions": 40})
+    """The flexible cube at its largest mesh with Moreau–Jean, whose matrices
+    are dense (model only: nothing is compiled)."""
+    return load_scene("flexible_cube", {"divisions": 40, "scheme": "mj"})
 
 
 @pytest.fixture
@@ -45,7 +48,7 @@ def machine_of(monkeypatch):
 def test_estimate_is_within_a_factor_of_1_5_of_the_recorded_peaks(divisions):
     n, peak = RECORDED[divisions]
     model = load_scene("flexible_cube", {"divisions": divisions}).model
-    est = memory.estimate_run_bytes(model, nj.DS(), 8)
+    est = memory.estimate_run_bytes(model, DENSE, 8)
     assert model.n_dof == n
     assert 1 / 1.5 < est.total / (peak * 1e9) < 1.5
 
@@ -69,12 +72,12 @@ def test_cube_at_40_divisions_is_refused_from_python_before_compiling(cube_40, m
     with pytest.raises(nj.ConfigError, match=CUBE_40):
         cube_40.run()
     with pytest.raises(nj.ConfigError, match=r"206,763 coordinates"):
-        nj.simulate(cube_40.model, nj.DS(), 0.0, 0.01, 1e-4, cube_40.q0, cube_40.v0)
+        nj.simulate(cube_40.model, DENSE, 0.0, 0.01, 1e-4, cube_40.q0, cube_40.v0)
 
 
 def test_cube_at_40_divisions_is_refused_by_the_command_line_in_one_line(tmp_path, capsys, machine_of):
     machine_of(21.3e9)
-    code = main(["run", "flexible_cube", "--set", "divisions=40", "--out", str(tmp_path / "o")])
+    code = main(["run", "flexible_cube", "--set", "divisions=40", "--scheme", "mj", "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == EXIT_INPUT
     assert err[-1].startswith("error: ") and "Traceback" not in "\n".join(err)
@@ -103,7 +106,7 @@ def test_skipping_the_check_goes_on_to_compile(cube_40, machine_of, monkeypatch,
 
 def test_unknown_available_memory_refuses_nothing(cube_40, machine_of):
     machine_of(None)
-    assert memory.check_fits(cube_40.model, nj.DS(), 8).dense_bytes > 1e12
+    assert memory.check_fits(cube_40.model, DENSE, 8).dense_bytes > 1e12
 
 
 def test_available_memory_is_read_where_the_platform_says(monkeypatch):

@@ -15,6 +15,12 @@ Run it from the repository root where JAX sees the accelerator (``pip install
    1, 64 and 1024, float64 and float32), with fewer steps and repeats than
    the default so that the whole check fits a short lease; its ``device``
    column names the accelerator.
+4. ``krylov/<dtype>/krylov.{csv,md,png}``: the large-model benchmark
+   (``experiments/benchmarks/bench_krylov.py``): the flexible cube at
+   ``--krylov-divisions`` (default 10, 20, 30) on the matrix-free path, and
+   on the dense one up to 10 divisions, in float64 and float32 (the GPU
+   column of docs/performance.md's "Large models"); ``--krylov-divisions ""``
+   skips it.
 
 On a CPU-only machine the "default device" is the CPU and the check compares
 it with itself; it is meant for a machine with an accelerator, where it
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -97,6 +104,8 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--max-seconds", type=float, default=20.0)
     parser.add_argument("--scenes", help="comma-separated scenes for the benchmark (default: all)")
+    parser.add_argument("--krylov-divisions", default="10,20,30",
+                        help="cube sizes of the large-model benchmark ('' skips it)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     info = [f"nsga_jax {nsga_jax.__version__}, jax {jax.__version__}, backend {jax.default_backend()}",
@@ -113,6 +122,11 @@ def main() -> int:
     table = markdown(rows)
     (args.out / "bench.md").write_text(table + "\n")
     print(table)
+    if args.krylov_divisions:
+        script = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_krylov.py"
+        for dtype in ("float64", "float32"):
+            subprocess.run([sys.executable, str(script), "--divisions", args.krylov_divisions, "--dense-max", "10",
+                            "--dtype", dtype, "--out", str(args.out / "krylov" / dtype)], check=False)
     return 0
 
 
