@@ -260,3 +260,22 @@ def test_a_large_cube_that_cannot_fit_is_refused_naming_the_matrix_free_path(tmp
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and err[-1].startswith("error: ")
     assert "206,763 coordinates (element blocks and vectors, no matrix assembled" in err[-1]
+
+
+@pytest.mark.slow
+def test_a_sweep_of_a_large_cube_equals_its_single_runs(tmp_path):
+    """A sweep batches members on the matrix-free path (1,536 coordinates:
+    matrix-free by default) and gives each member's single run."""
+    from nsga_jax.sweep import sweep
+
+    overrides = {**CUBE, "divisions": 7, "t_end": 12 * CUBE["h"]}
+    result = sweep("flexible_cube", {"E": [80.0, 100.0]}, overrides=overrides, out=tmp_path / "s")
+    assert load_scene("flexible_cube", overrides).scheme().matrix_kinds(cube(7).model)[0] is KrylovHeld
+    for row in result.rows:
+        single = load_scene("flexible_cube", {**overrides, "E": row["E"]}).run()
+        observed = single.observables
+        assert row["failed_steps"] == 0 and single.failed_steps.size == 0
+        for name in ("x8_uz", "x8_vz", "x1_uz", "energy"):
+            scale = float(np.abs(observed[name]).max())
+            np.testing.assert_allclose(row[f"{name}_final"], observed[name][-1], rtol=0, atol=1e-12 * scale,
+                                       err_msg=name)
