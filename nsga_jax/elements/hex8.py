@@ -15,6 +15,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..blocks import ElementMatrix
+
 _CORNERS = np.array(
     [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1], [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]],
     dtype=float,
@@ -85,6 +87,19 @@ def hex8_stiffness(x_e: jax.Array, p) -> jax.Array:
          + mu * jnp.einsum("g,gik,gab->aibk", dV, FFt, grad_dot)
          + mu * jnp.einsum("g,gbi,gak->aibk", dV, g, g))
     return K.reshape(24, 24)
+
+
+def hex8_mass_blocks(group, n: int) -> ElementMatrix:
+    """The consistent mass of a group of hex8 elements (an
+    :class:`~nsga_jax.assembly.ElementGroup`), element by element, never
+    assembled; n coordinates, 3 a node."""
+    return ElementMatrix(jax.vmap(hex8_mass)(group.params), group.dofs, n, 3)
+
+
+def hex8_stiffness_blocks(group, q: jax.Array, n: int) -> ElementMatrix:
+    """The tangent stiffness :func:`hex8_stiffness` of a group at the
+    coordinates q (n,), element by element, never assembled."""
+    return ElementMatrix(jax.vmap(hex8_stiffness)(group.gather(q), group.params), group.dofs, n, 3)
 
 
 def _gauss_shape_functions(dtype) -> jax.Array:

@@ -10,16 +10,7 @@ import numpy as np
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
-from ..blocks import ElementMatrix, NodeRows
-from ..elements.hex8 import (
-    hex8_body_force,
-    hex8_geometry,
-    hex8_internal_force,
-    hex8_mass,
-    hex8_stiffness,
-    lame,
-    svk_energy,
-)
+from ..elements.hex8 import hex8_body_force, hex8_geometry, hex8_internal_force, hex8_mass, lame, svk_energy
 from ..validation import POSITIVE, UNIT_INTERVAL, Range
 from .base import Model
 
@@ -128,23 +119,6 @@ class HexSolid(Model):
 
     def tangents(self, q: Vector, v: Vector, t: Scalar) -> tuple[Matrix, Matrix]:
         return self.elements.tangents(hex8_internal_force, q, v, self.n_dof, velocity_dependent=False)
-
-    matrix_free = True
-
-    def element_mass(self, q: Vector) -> ElementMatrix:
-        """M element by element (never assembled)."""
-        group = self.elements
-        return ElementMatrix(jax.vmap(hex8_mass)(group.params), group.dofs, self.n_dof, 3)
-
-    def element_stiffness(self, q: Vector) -> ElementMatrix:
-        """K(q) element by element (never assembled)."""
-        group = self.elements
-        return ElementMatrix(jax.vmap(hex8_stiffness)(group.gather(q), group.params), group.dofs, self.n_dof, 3)
-
-    def constraint_rows(self, q: Vector) -> NodeRows:
-        """The floor's rows: +1 on each contact node's z."""
-        cols = 3 * self.contact_nodes.array[:, None] + 2
-        return NodeRows(jnp.ones(cols.shape, q.dtype), StaticIndex(cols), self.n_dof)
 
     def unilateral(self, q: Vector) -> jax.Array:
         return q.reshape(-1, 3)[self.contact_nodes.array, 2] - self.floor_z

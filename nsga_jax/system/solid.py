@@ -20,7 +20,8 @@ from ..elements.hex8 import (
     hex8_geometry,
     hex8_internal_force,
     hex8_mass,
-    hex8_stiffness,
+    hex8_mass_blocks,
+    hex8_stiffness_blocks,
     lame,
     structured_hex_mesh,
     svk_energy,
@@ -157,13 +158,11 @@ class HexSolid(AbstractBody):
 
     def element_mass(self, q: Vector) -> ElementMatrix:
         """M element by element (never assembled)."""
-        group = self.elements
-        return ElementMatrix(jax.vmap(hex8_mass)(group.params), group.dofs, self.n_dof, 3)
+        return hex8_mass_blocks(self.elements, self.n_dof)
 
     def element_stiffness(self, q: Vector) -> ElementMatrix:
         """K(q) element by element (never assembled)."""
-        group = self.elements
-        return ElementMatrix(jax.vmap(hex8_stiffness)(group.gather(q), group.params), group.dofs, self.n_dof, 3)
+        return hex8_stiffness_blocks(self.elements, q, self.n_dof)
 
     def node_dofs(self, nodes: tuple[int, ...]) -> np.ndarray:
         """The coordinates (k, 3) of the nodes ``nodes`` (static): x, y, z of each."""
