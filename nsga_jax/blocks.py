@@ -209,3 +209,42 @@ class NodeBlockMatrix(eqx.Module):
         rows = np.broadcast_to(rows, (N, P, w, w))
         cols = np.broadcast_to(cols, (N, P, w, w))
         return jnp.zeros((self.n, self.n), self.blocks.dtype).at[rows, cols].add(self.blocks)
+
+
+class TensorMassInverse(eqx.Module):
+    """The exact inverse of the consistent mass of a box meshed with equal
+    trilinear hexahedra and a uniform density: M = ρ (M_z ⊗ M_y ⊗ M_x) ⊗ I_3,
+    with M_a the 1D mass of linear elements along axis a (nodes numbered x
+    fastest), so M⁻¹ x is three products with the small inverses
+    (n_a + 1) × (n_a + 1), O(n (n_x + n_y + n_z)) multiply-adds.
+
+    Attributes:
+        inverses: (M_z⁻¹, M_y⁻¹, M_x⁻¹) of the 1D masses per unit density.
+        density: ρ [kg/m³].
+    """
+
+    inverses: tuple[jax.Array, jax.Array, jax.Array]
+    density: jax.Array
+
+    @classmethod
+    def of_box(cls, size: jax.Array, divisions: tuple[int, int, int], density: jax.Array) -> "TensorMassInverse":
+        """From the box's side lengths (3,) [m], its element counts (x, y, z) and ρ."""
+        def inverse_1d(length, n):
+            h = length / n
+            nodes = np.arange(n + 1)
+            ends = (nodes == 0) | (nodes == n)
+            diagonal = jnp.where(jnp.asarray(ends), h / 3, 2 * h / 3)
+            off = jnp.full((n,), h / 6)
+            return jnp.linalg.inv(jnp.diag(diagonal) + jnp.diag(off, 1) + jnp.diag(off, -1))
+
+        x, y, z = (inverse_1d(size[a], divisions[a]) for a in range(3))
+        return cls((z, y, x), jnp.asarray(density))
+
+    def apply(self, r: Vector) -> Vector:
+        """M⁻¹ r, shape (n,) -> (n,)."""
+        z, y, x = self.inverses
+        R = r.reshape(z.shape[0], y.shape[0], x.shape[0], 3)
+        R = jnp.einsum("kl,ljic->kjic", z, R)
+        R = jnp.einsum("jl,klic->kjic", y, R)
+        R = jnp.einsum("il,kjlc->kjic", x, R)
+        return R.reshape(-1) / self.density

@@ -51,6 +51,18 @@ def test_element_and_node_blocks_equal_the_assembled_matrices():
         np.testing.assert_allclose(blocks.node_blocks().frobenius_norm(), jnp.linalg.norm(dense), rtol=1e-13)
 
 
+def test_tensor_mass_inverse_is_exact_and_preconditions_the_velocity_jump():
+    scene = cube(3)
+    model = scene.model
+    M = model.mass(jnp.zeros(model.n_dof))
+    x = jnp.asarray(np.random.default_rng(4).standard_normal(model.n_dof))
+    np.testing.assert_allclose(model.mass_inverse().apply(M @ x), x, rtol=0, atol=1e-13)
+    # the velocity jump's M, solved by conjugate gradients preconditioned by the exact M⁻¹
+    ops = dataclasses.replace(scene.scheme(), krylov_min_dof=0).prepare(model, 1e-4, 0.0)
+    operator = ops.velocity.factored(lambda: None)
+    np.testing.assert_allclose(operator.solve(M @ x), x, rtol=0, atol=1e-12)
+
+
 def test_closed_form_hex8_stiffness_equals_jacfwd_of_the_force():
     group = cube(1).model.bodies[0].elements
     rng = np.random.default_rng(2)

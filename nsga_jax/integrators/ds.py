@@ -37,7 +37,7 @@ from .base import (
 )
 from .coefficients import GenAlphaCoefficients
 from .friction import projection_start
-from .krylov import KRYLOV_MIN_DOF, KrylovOperator, linear_tolerance
+from .krylov import KRYLOV_MIN_DOF, KrylovOperator, linear_tolerance, mass_inverse, mass_preconditioner
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
@@ -155,8 +155,8 @@ class DS(AbstractGenAlpha):
             real = jnp.result_type(q0, float)
             q0, v0 = jnp.asarray(q0, real), jnp.asarray(v0, real)
             M = model.element_mass(q0).node_blocks()
-            solve = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real),
-                                      linear_tolerance(self.tol_r, real)).solve
+            solve = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real), linear_tolerance(self.tol_r, real),
+                                      mass_preconditioner(mass_inverse(model, real), 1.0)).solve
             vd0 = consistent_acceleration(model, t0, q0, v0, solve)
             state = StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
         if state is None:

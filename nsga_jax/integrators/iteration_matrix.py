@@ -46,10 +46,11 @@ BuildMatrix = Callable[[], tuple[Matrix, Scalar, Scalar]]
 iterate and the Frobenius norms of the tangents it holds (evaluated only by
 the kinds that are not constant)."""
 
-BuildElements = Callable[[], tuple[Any, Scalar, Scalar]]
-"""``() -> (A, ||K||, ||C||)``: a sub-problem's top-left block as element
-blocks (:class:`~nsga_jax.assembly.ElementMatrix`), for the kinds that never
-assemble it (:mod:`~nsga_jax.integrators.krylov`)."""
+BuildElements = Callable[[], tuple[Any, Scalar, Scalar, Any]]
+"""``() -> (A, ||K||, ||C||, preconditioner)``: a sub-problem's top-left
+block as node blocks (:class:`~nsga_jax.blocks.NodeBlockMatrix`) and what
+preconditions it, for the kinds that never assemble it
+(:mod:`~nsga_jax.integrators.krylov`)."""
 
 
 class AbstractIterationMatrix(eqx.Module):

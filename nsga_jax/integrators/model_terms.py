@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
-from ..blocks import NodeBlockMatrix, NodeRows
+from ..blocks import NodeBlockMatrix, NodeRows, TensorMassInverse
 from ..models.base import Model
 from .linalg import band_product
 
@@ -92,10 +92,13 @@ class ElementMass(AbstractMass):
     Attributes:
         M: the mass matrix as node blocks (:class:`~nsga_jax.blocks.NodeBlockMatrix`, n × n).
         M_norm: its Frobenius norm.
+        inverse: M⁻¹ where the model has an exact one that costs O(n)
+            (:meth:`~nsga_jax.models.Model.mass_inverse`), else ``None``.
     """
 
     M: NodeBlockMatrix
     M_norm: Scalar
+    inverse: TensorMassInverse | None = None
     is_constant: ClassVar[bool] = True
 
     def matrix(self, model: Model, q: Vector) -> Matrix:

@@ -27,7 +27,16 @@ from .iteration_matrix import (
     Held,
     Refactored,
 )
-from .krylov import KRYLOV_KINDS, KrylovConstant, KrylovFresh, KrylovHeld, KrylovOperator, linear_tolerance
+from .krylov import (
+    KRYLOV_KINDS,
+    KrylovConstant,
+    KrylovFresh,
+    KrylovHeld,
+    KrylovOperator,
+    linear_tolerance,
+    mass_inverse,
+    mass_preconditioner,
+)
 from .linalg import band_matrix
 from .model_terms import (
     AbstractConstraintJacobian,
@@ -203,6 +212,7 @@ def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
     real = jnp.result_type(t0, float)
     zeros = jnp.zeros((model.n_dof,), real)
     M = model.element_mass(zeros).node_blocks()
+    inverse = mass_inverse(model, real)
     rtol = linear_tolerance(tol_r, real)
     constraints: AbstractConstraintJacobian = VaryingJacobian()
     if model.n_constraints:
@@ -219,8 +229,9 @@ def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
         c_m, c_k = top_left(1.0, 0.0, 0.0), top_left(0.0, 1.0, 0.0)  # type: ignore[arg-type]
         K = model.element_stiffness(zeros).node_blocks() if model.linear_force else M.combine(0.0, M, 0.0)
         zero = jnp.zeros((), real)
-        return KrylovConstant(KrylovOperator.of(M.combine(c_m, K, c_k), K.frobenius_norm(), zero, rtol))
+        return KrylovConstant(KrylovOperator.of(M.combine(c_m, K, c_k), K.frobenius_norm(), zero, rtol,
+                                                mass_preconditioner(inverse, c_m)))
 
     smooth, position, velocity = (build(kind, top_left) for kind, top_left in zip(kinds, top_lefts))
-    return Operators(mass=ElementMass(M, M.frobenius_norm()), force=NonlinearForce(), constraints=constraints,
+    return Operators(mass=ElementMass(M, M.frobenius_norm(), inverse), force=NonlinearForce(), constraints=constraints,
                      smooth=smooth, position=position, velocity=velocity)

@@ -30,7 +30,7 @@ import numpy as np
 from jax import lax
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
-from ..blocks import ElementMatrix, NodeRows
+from ..blocks import ElementMatrix, NodeRows, TensorMassInverse
 from ..results import ConfigError
 from ..validation import Range, integer
 
@@ -154,6 +154,11 @@ class Model(eqx.Module):
     def element_stiffness(self, q: Vector) -> ElementMatrix:
         """K(q) = -df/dq as element blocks, never assembled (matrix-free models)."""
         raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
+
+    def mass_inverse(self) -> TensorMassInverse | None:
+        """An exact M⁻¹ that costs O(n) (a matrix-free model with a constant,
+        structured mass), which preconditions its iteration matrices, or ``None``."""
+        return None
 
     def constraint_rows(self, q: Vector) -> NodeRows:
         """g_q(q) as node-local rows (matrix-free models), shape (nc, n)."""

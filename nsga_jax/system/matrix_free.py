@@ -50,6 +50,12 @@ def element_mass(model, q: Vector) -> ElementMatrix:
     return model.bodies[0].element_mass(q)
 
 
+def mass_inverse(model):
+    """The exact M⁻¹ of the system's one body where it has one (a box solid), else ``None``."""
+    body = model.bodies[0]
+    return body.mass_inverse() if hasattr(body, "mass_inverse") else None
+
+
 def element_stiffness(model, q: Vector) -> ElementMatrix:
     """K(q) of the system's one body (gravity adds none), element by element."""
     return model.bodies[0].element_stiffness(q)

@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
-from ..blocks import ElementMatrix, NodeRows
+from ..blocks import ElementMatrix, NodeRows, TensorMassInverse
 from ..models.base import Model
 from . import layout, matrix_free
 from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint
@@ -126,6 +126,9 @@ class SystemModel(Model):
 
     def element_stiffness(self, q: Vector) -> ElementMatrix:
         return matrix_free.element_stiffness(self, q)
+
+    def mass_inverse(self) -> TensorMassInverse | None:
+        return matrix_free.mass_inverse(self)
 
     def constraint_rows(self, q: Vector) -> NodeRows:
         return matrix_free.constraint_rows(self, q)
