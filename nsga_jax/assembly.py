@@ -175,4 +175,3 @@ def scatter_matrix(dofs: StaticIndex, values: jax.Array, n: int) -> Matrix:
     dense = jnp.swapaxes(skewed, 0, 1).reshape(n_nodes * s, n_nodes * s)
     tail = n - offset - n_nodes * s
     return jnp.pad(dense, [(offset, tail), (offset, tail)])
-

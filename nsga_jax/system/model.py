@@ -22,9 +22,9 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
-from ..blocks import ElementMatrix, NodeRows, TensorMassInverse
 from ..models.base import Model
-from . import layout, matrix_free
+from . import layout
+from . import matrix_free as large
 from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint
 from .forces import Gravity
 from .groups import call, gather, scatter_block, scatter_vector, shift
@@ -117,21 +117,12 @@ class SystemModel(Model):
             return None
         return max(b for b in bands if b is not None)
 
-    @property
-    def matrix_free(self) -> bool:
-        return matrix_free.is_matrix_free(self)
-
-    def element_mass(self, q: Vector) -> ElementMatrix:
-        return matrix_free.element_mass(self, q)
-
-    def element_stiffness(self, q: Vector) -> ElementMatrix:
-        return matrix_free.element_stiffness(self, q)
-
-    def mass_inverse(self) -> TensorMassInverse | None:
-        return matrix_free.mass_inverse(self)
-
-    def constraint_rows(self, q: Vector) -> NodeRows:
-        return matrix_free.constraint_rows(self, q)
+    # a large model solved without assembling (system/matrix_free.py)
+    matrix_free = property(large.is_matrix_free)  # type: ignore[assignment]
+    element_mass = large.element_mass
+    element_stiffness = large.element_stiffness
+    mass_inverse = large.mass_inverse  # type: ignore[assignment]
+    constraint_rows = large.constraint_rows
 
     @property
     def mbar(self) -> Scalar:
