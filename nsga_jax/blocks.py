@@ -10,7 +10,9 @@ node-local constraint rows, for models too large for dense n × n arrays
   which on a CPU measured several times faster than the element-by-element
   product (``experiments/benchmarks/bench_krylov.py``), and the diagonal
   and the Frobenius norm are exact reads;
-- :class:`NodeRows`: constraint rows each supported on one node.
+- :class:`NodeRows`: constraint rows each supported on one node;
+- :class:`KroneckerMass`: the mass of a box of equal hexahedra, whose
+  product and inverse are Kronecker products of 1D masses.
 """
 
 from __future__ import annotations
@@ -211,40 +213,60 @@ class NodeBlockMatrix(eqx.Module):
         return jnp.zeros((self.n, self.n), self.blocks.dtype).at[rows, cols].add(self.blocks)
 
 
-class TensorMassInverse(eqx.Module):
-    """The exact inverse of the consistent mass of a box meshed with equal
-    trilinear hexahedra and a uniform density: M = ρ (M_z ⊗ M_y ⊗ M_x) ⊗ I_3,
-    with M_a the 1D mass of linear elements along axis a (nodes numbered x
-    fastest), so M⁻¹ x is three products with the small inverses
-    (n_a + 1) × (n_a + 1), O(n (n_x + n_y + n_z)) multiply-adds.
+class KroneckerMass(eqx.Module):
+    """The consistent mass of a box meshed with equal trilinear hexahedra and
+    a uniform density, M = ρ (M_z ⊗ M_y ⊗ M_x) ⊗ I_3, with M_a the 1D mass of
+    linear elements along axis a (nodes numbered x fastest): M x and M⁻¹ x
+    are each three products with (n_a + 1) × (n_a + 1) matrices, O(n (n_x +
+    n_y + n_z)) multiply-adds, where the node blocks' product gathers 27
+    neighbours a node (``experiments/benchmarks/bench_large_kernels.py``).
 
     Attributes:
-        inverses: (M_z⁻¹, M_y⁻¹, M_x⁻¹) of the 1D masses per unit density.
-        density: ρ [kg/m³].
+        masses: (M_z, M_y, M_x), the 1D masses per unit density [m].
+        inverses: their inverses.
+        density: ρ [kg/m³], times the scale of :meth:`scaled`.
     """
 
+    masses: tuple[jax.Array, jax.Array, jax.Array]
     inverses: tuple[jax.Array, jax.Array, jax.Array]
     density: jax.Array
 
     @classmethod
-    def of_box(cls, size: jax.Array, divisions: tuple[int, int, int], density: jax.Array) -> "TensorMassInverse":
+    def of_box(cls, size: jax.Array, divisions: tuple[int, int, int], density: jax.Array) -> "KroneckerMass":
         """From the box's side lengths (3,) [m], its element counts (x, y, z) and ρ."""
-        def inverse_1d(length, n):
+        def mass_1d(length, n):
             h = length / n
             nodes = np.arange(n + 1)
             ends = (nodes == 0) | (nodes == n)
             diagonal = jnp.where(jnp.asarray(ends), h / 3, 2 * h / 3)
             off = jnp.full((n,), h / 6)
-            return jnp.linalg.inv(jnp.diag(diagonal) + jnp.diag(off, 1) + jnp.diag(off, -1))
+            return jnp.diag(diagonal) + jnp.diag(off, 1) + jnp.diag(off, -1)
 
-        x, y, z = (inverse_1d(size[a], divisions[a]) for a in range(3))
-        return cls((z, y, x), jnp.asarray(density))
+        x, y, z = (mass_1d(size[a], divisions[a]) for a in range(3))
+        return cls((z, y, x), (jnp.linalg.inv(z), jnp.linalg.inv(y), jnp.linalg.inv(x)), jnp.asarray(density))
 
-    def apply(self, r: Vector) -> Vector:
-        """M⁻¹ r, shape (n,) -> (n,)."""
-        z, y, x = self.inverses
+    @staticmethod
+    def _kron(factors: tuple[jax.Array, jax.Array, jax.Array], r: Vector) -> Vector:
+        z, y, x = factors
         R = r.reshape(z.shape[0], y.shape[0], x.shape[0], 3)
         R = jnp.einsum("kl,ljic->kjic", z, R)
         R = jnp.einsum("jl,klic->kjic", y, R)
         R = jnp.einsum("il,kjlc->kjic", x, R)
-        return R.reshape(-1) / self.density
+        return R.reshape(-1)
+
+    def mv(self, x: Vector) -> Vector:
+        """M x, shape (n,) -> (n,)."""
+        return self.density * self._kron(self.masses, x)
+
+    def solve(self, r: Vector) -> Vector:
+        """M⁻¹ r, shape (n,) -> (n,)."""
+        return self._kron(self.inverses, r) / self.density
+
+    def diagonal(self) -> Vector:
+        """The diagonal of M, shape (n,)."""
+        z, y, x = (jnp.diagonal(m) for m in self.masses)
+        return self.density * jnp.repeat(jnp.einsum("k,j,i->kji", z, y, x).reshape(-1), 3)
+
+    def scaled(self, c) -> "KroneckerMass":
+        """c M."""
+        return KroneckerMass(self.masses, self.inverses, c * self.density)

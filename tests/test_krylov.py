@@ -16,7 +16,7 @@ import pytest
 
 import nsga_jax
 from nsga_jax.blocks import NodeRows
-from nsga_jax.elements.hex8 import hex8_internal_force, hex8_stiffness
+from nsga_jax.elements.hex8 import hex8_internal_force, hex8_stiffness, svk_energy
 from nsga_jax.integrators.iteration_matrix import Held
 from nsga_jax.integrators.krylov import KrylovConstant, KrylovFresh, KrylovHeld, KrylovOperator
 from nsga_jax.integrators.linalg import Factorisation, solve_bordered
@@ -51,19 +51,23 @@ def test_element_and_node_blocks_equal_the_assembled_matrices():
         np.testing.assert_allclose(blocks.node_blocks().frobenius_norm(), jnp.linalg.norm(dense), rtol=1e-13)
 
 
-def test_tensor_mass_inverse_is_exact_and_preconditions_the_velocity_jump():
+def test_kronecker_mass_is_exact_and_preconditions_the_velocity_jump():
     scene = cube(3)
     model = scene.model
     M = model.mass(jnp.zeros(model.n_dof))
     x = jnp.asarray(np.random.default_rng(4).standard_normal(model.n_dof))
-    np.testing.assert_allclose(model.mass_inverse().apply(M @ x), x, rtol=0, atol=1e-13)
+    kronecker = model.kronecker_mass()
+    np.testing.assert_allclose(kronecker.mv(x), M @ x, rtol=0, atol=1e-13 * float(jnp.abs(M).max()))
+    np.testing.assert_allclose(kronecker.solve(M @ x), x, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(kronecker.diagonal(), jnp.diagonal(M), rtol=1e-14)
+    np.testing.assert_allclose(kronecker.scaled(3.0).mv(x), 3.0 * (M @ x), rtol=0, atol=1e-12 * float(jnp.abs(M).max()))
     # the velocity jump's M, solved by conjugate gradients preconditioned by the exact M⁻¹
     ops = dataclasses.replace(scene.scheme(), krylov_min_dof=0).prepare(model, 1e-4, 0.0)
     operator = ops.velocity.factored(lambda: None)
     np.testing.assert_allclose(operator.solve(M @ x), x, rtol=0, atol=1e-12)
 
 
-def test_closed_form_hex8_stiffness_equals_jacfwd_of_the_force():
+def test_closed_form_hex8_force_and_stiffness_equal_the_energy_derivatives():
     group = cube(1).model.bodies[0].elements
     rng = np.random.default_rng(2)
     x = group.gather(jnp.asarray(cube(1).q0))[0] + 0.01 * jnp.asarray(rng.standard_normal(24))
@@ -71,6 +75,10 @@ def test_closed_form_hex8_stiffness_equals_jacfwd_of_the_force():
     exact = -jax.jacfwd(hex8_internal_force)(x, jnp.zeros(24), params)
     np.testing.assert_allclose(hex8_stiffness(x, params), exact, rtol=0, atol=1e-13 * float(jnp.abs(exact).max()))
     np.testing.assert_allclose(hex8_stiffness(x, params), hex8_stiffness(x, params).T, rtol=0, atol=1e-15)
+    # and the closed-form force is the energy's gradient
+    force = hex8_internal_force(x, jnp.zeros(24), params)
+    np.testing.assert_allclose(force, -jax.grad(svk_energy)(x, params), rtol=0,
+                               atol=1e-13 * float(jnp.abs(force).max()))
 
 
 def test_node_rows_equal_the_constraint_jacobian():

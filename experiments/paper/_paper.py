@@ -39,8 +39,9 @@ def output_dir(script_doc: str, name: str) -> Path:
 
 
 def run_study(name: str, schemes, hs, ref_h: float, ref_scheme: str, overrides: dict, out: Path,
-              mode: str = "separate", max_iter_cs: int | None = None, observables=None):
-    """Reference, study, CSV/PNG; copies the PNGs to docs/figures/paper_<name>_*.png."""
+              mode: str = "separate", max_iter_cs: int | None = None, observables=None, variant: str = ""):
+    """Reference, study, CSV/PNG; copies the PNGs to docs/figures/paper_<name>_*.png
+    (paper_<name>_<variant>_*.png for a ``variant`` of the scene, such as a finer mesh)."""
     t = time.perf_counter()
     print(f"{name}: reference {ref_scheme.upper()} at h = {ref_h:g} ...", flush=True)
     reference = make_reference(name, {**overrides, "scheme": ref_scheme}, ref_h)
@@ -49,13 +50,13 @@ def run_study(name: str, schemes, hs, ref_h: float, ref_scheme: str, overrides: 
         extra = {"max_iter": max_iter_cs} if (scheme == "cs" and max_iter_cs) else {}
         print(f"{name}: {scheme.upper()} at h = {', '.join(f'{h:g}' for h in hs)} ...", flush=True)
         rows += study(name, [scheme], hs, reference, {**overrides, **extra}, observables, mode=mode)
-    draw(rows, out, name, reference)
+    draw(rows, out, name, reference, variant)
     elapsed = time.perf_counter() - t
     return rows, reference, elapsed
 
 
-def read_study(results_dir: Path) -> tuple[str, list[StudyRow], Reference]:
-    """The scene, the rows and the reference of a committed study (study.csv and
+def read_study(results_dir: Path) -> tuple[str, str, list[StudyRow], Reference]:
+    """The scene, its variant, the rows and the reference of a committed study (study.csv and
     claims.json of a results folder such as docs/results/paper_bar), read back
     as written by :func:`run_study` and :func:`finish`."""
     results_dir = Path(results_dir)
@@ -69,7 +70,7 @@ def read_study(results_dir: Path) -> tuple[str, list[StudyRow], Reference]:
                         if r[f"{s}_mean"] != ""},  # another scheme's sub-problem: blank in this row
             errors={c[len("error_"):]: float(v) for c, v in r.items() if c.startswith("error_")},
         ))
-    return claims["scene"], rows, Reference(description=claims["reference"])
+    return claims["scene"], claims.get("variant", ""), rows, Reference(description=claims["reference"])
 
 
 def _wrap_orders(fig) -> None:
@@ -97,29 +98,35 @@ def _log_solves(fig, spread: float = 20.0) -> None:
         plotting.log_ticks(ax, "y")
 
 
-def draw(rows, out: Path, name: str, reference: Reference) -> dict[str, Path]:
+def figure_stem(name: str, variant: str = "") -> str:
+    """paper_<name> or paper_<name>_<variant>, with the variant's spaces as underscores."""
+    return f"paper_{name}" + (f"_{variant.replace(' ', '_')}" if variant else "")
+
+
+def draw(rows, out: Path, name: str, reference: Reference, variant: str = "") -> dict[str, Path]:
     """study.csv and the three study figures in ``out`` (:func:`write_study`,
     with :func:`_wrap_orders` and :func:`_log_solves`), the figures copied to
-    docs/figures/paper_<name>_*.png."""
+    docs/figures/<:func:`figure_stem`>_*.png."""
     with plotting.capture() as figures:
-        paths = write_study(rows, out, name, reference)
+        paths = write_study(rows, out, f"{name} ({variant})" if variant else name, reference)
     with plotting.style():
         _wrap_orders(figures[paths["convergence"]])
         _log_solves(figures[paths["iterations"]])
     FIGURES.mkdir(parents=True, exist_ok=True)
     for key in ("convergence", "iterations", "work_precision"):
         plotting.save(figures[paths[key]], paths[key])
-        shutil.copy(paths[key], FIGURES / f"paper_{name}_{key}.png")
+        shutil.copy(paths[key], FIGURES / f"{figure_stem(name, variant)}_{key}.png")
     return paths
 
 
 def replot(results_dir: Path) -> list[Path]:
     """Redraw the three study figures of a committed study from its CSV (no
     rerun) into docs/figures/paper_<scene>_*.png."""
-    name, rows, reference = read_study(results_dir)
+    name, variant, rows, reference = read_study(results_dir)
     with tempfile.TemporaryDirectory() as tmp:
-        draw(rows, Path(tmp), name, reference)
-    return [FIGURES / f"paper_{name}_{key}.png" for key in ("convergence", "iterations", "work_precision")]
+        draw(rows, Path(tmp), name, reference, variant)
+    stem = figure_stem(name, variant)
+    return [FIGURES / f"{stem}_{key}.png" for key in ("convergence", "iterations", "work_precision")]
 
 
 def table(rows) -> str:
@@ -136,16 +143,17 @@ def table(rows) -> str:
 
 
 def finish(name: str, rows, reference, elapsed: float, claims: list[tuple[str, str, bool]], out: Path,
-           command: str) -> None:
+           command: str, variant: str = "") -> None:
     """Write claims.json and summary.md (the table and the paper's claims checked)."""
     order = {f"{s}:{k}": v for (s, k), v in slopes(rows).items()}
     summary = {
-        "scene": name, "reference": reference.description, "command": command,
+        "scene": name, "variant": variant, "reference": reference.description, "command": command,
         "elapsed_s": round(elapsed, 1), "orders": order,
         "claims": [{"paper": p, "ours": o, "agrees": bool(a)} for p, o, a in claims],
     }
     (out / "claims.json").write_text(json.dumps(summary, indent=2) + "\n")
-    md = [f"### {name}", "", f"`{command}` ({elapsed / 60:.1f} min on this machine); reference: "
+    heading = f"### {name}" + (f" ({variant})" if variant else "")
+    md = [heading, "", f"`{command}` ({elapsed / 60:.1f} min on this machine); reference: "
           f"{reference.description}.", "", table(rows), "",
           "Observed orders: " + ", ".join(f"{k} {v:.2f}" for k, v in order.items()), "",
           "| the paper says | we measure | agrees |", "|---|---|---|"]

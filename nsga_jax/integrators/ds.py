@@ -37,7 +37,7 @@ from .base import (
 )
 from .coefficients import GenAlphaCoefficients
 from .friction import projection_start
-from .krylov import KRYLOV_MIN_DOF, KrylovOperator, linear_tolerance, mass_inverse, mass_preconditioner
+from .krylov import KRYLOV_MIN_DOF, KrylovOperator, kronecker_mass, linear_tolerance, mass_preconditioner
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
@@ -154,9 +154,10 @@ class DS(AbstractGenAlpha):
         if self.matrix_free(model):  # v̇̃_0 by conjugate gradients on M's element blocks
             real = jnp.result_type(q0, float)
             q0, v0 = jnp.asarray(q0, real), jnp.asarray(v0, real)
-            M = model.element_mass(q0).node_blocks()
+            preconditioner = mass_preconditioner(kronecker_mass(model, real), 1.0)
+            M = model.element_mass(q0).node_blocks() if preconditioner is None else preconditioner.mass
             solve = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real), linear_tolerance(self.tol_r, real),
-                                      mass_preconditioner(mass_inverse(model, real), 1.0)).solve
+                                      preconditioner).solve
             vd0 = consistent_acceleration(model, t0, q0, v0, solve)
             state = StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
         if state is None:

@@ -10,7 +10,7 @@ with A by conjugate gradients (``jax.scipy.sparse.linalg.cg``, whose
 derivatives are those of the linear solve, one more solve each). The blocks
 are dominated by the mass at the steps the scheme takes, so (c_m M)⁻¹
 preconditions them well where the model has an exact M⁻¹ that costs O(n)
-(:meth:`~nsga_jax.models.Model.mass_inverse`), and A's diagonal otherwise
+(:meth:`~nsga_jax.models.Model.kronecker_mass`), and A's diagonal otherwise
 (the Jacobi-scaled mass of trilinear hexahedra has a condition number below
 30 whatever the mesh); either way the iterations do not grow with n.
 
@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import jax.scipy.sparse.linalg as jsp
 
 from .._custom_types import ActiveSet, Scalar, ScalarLike, Vector
-from ..blocks import NodeBlockMatrix, NodeRows, TensorMassInverse
+from ..blocks import KroneckerMass, NodeBlockMatrix, NodeRows
 from ..models.base import Model
 from .iteration_matrix import AbstractIterationMatrix, BuildElements, BuildMatrix
 from .linalg import AbstractFactorisation
@@ -82,37 +82,41 @@ def linear_tolerance(tol_r: ScalarLike, dtype) -> jax.Array:
 def cg(matvec: Callable[[Vector], Vector], b: Vector, precondition: Callable[[Vector], Vector],
        rtol: Scalar) -> Vector:
     """x with ||matvec(x) - b|| <= rtol ||b|| by preconditioned conjugate
-    gradients (``jax.scipy.sparse.linalg.cg``: differentiable as a linear solve)."""
-    x, _ = jsp.cg(matvec, b, tol=jax.lax.stop_gradient(rtol), atol=0.0, maxiter=MAX_STEPS, M=precondition)
+    gradients (``jax.scipy.sparse.linalg.cg``: differentiable as a linear
+    solve), started from the preconditioned right-hand side: the solution
+    where the preconditioner is exact (A = c_m M), and otherwise a start
+    whose first product measures something, where the default start at zero
+    spends one product on A 0 (a third of the products of a run of the cube,
+    ``experiments/benchmarks/bench_large_kernels.py``)."""
+    x, _ = jsp.cg(matvec, b, x0=precondition(b), tol=jax.lax.stop_gradient(rtol), atol=0.0, maxiter=MAX_STEPS,
+                  M=precondition)
     return x
 
 
 class MassPreconditioner(eqx.Module):
-    """(c_m M)⁻¹ from an exact M⁻¹ (:class:`~nsga_jax.blocks.TensorMassInverse`):
+    """(c_m M)⁻¹ from an exact M⁻¹ (:class:`~nsga_jax.blocks.KroneckerMass`):
     the preconditioner of A = c_m M + c_k K, whose stiffness part is small
     at the steps the scheme takes (A⁻¹ exactly where c_k = 0).
 
     Attributes:
-        inverse: M⁻¹.
-        scale: 1 / c_m.
+        mass: c_m M, with its exact inverse.
     """
 
-    inverse: TensorMassInverse
-    scale: Scalar
+    mass: KroneckerMass
 
     def apply(self, r: Vector) -> Vector:
-        return self.scale * self.inverse.apply(r)
+        return self.mass.solve(r)
 
 
-def mass_inverse(model: Model, dtype) -> TensorMassInverse | None:
-    """The model's exact O(n) M⁻¹ in the run's precision, or ``None``."""
-    inverse = model.mass_inverse()
-    return None if inverse is None else jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), inverse)
+def kronecker_mass(model: Model, dtype) -> KroneckerMass | None:
+    """The model's M with an exact O(n) product and inverse, in the run's precision, or ``None``."""
+    mass = model.kronecker_mass()
+    return None if mass is None else jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), mass)
 
 
-def mass_preconditioner(inverse: TensorMassInverse | None, c_m) -> MassPreconditioner | None:
+def mass_preconditioner(mass: KroneckerMass | None, c_m) -> MassPreconditioner | None:
     """(c_m M)⁻¹ where the model has an exact M⁻¹, else ``None`` (the diagonal serves)."""
-    return None if inverse is None else MassPreconditioner(inverse, 1.0 / jnp.asarray(c_m, inverse.density.dtype))
+    return None if mass is None else MassPreconditioner(mass.scaled(jnp.asarray(c_m, mass.density.dtype)))
 
 
 class KrylovOperator(AbstractFactorisation):
@@ -126,7 +130,9 @@ class KrylovOperator(AbstractFactorisation):
     48 to 54.
 
     Attributes:
-        A: the block, :class:`~nsga_jax.blocks.NodeBlockMatrix` (n × n, never assembled).
+        A: the block, :class:`~nsga_jax.blocks.NodeBlockMatrix` (n × n, never
+            assembled), or c_m M as a :class:`~nsga_jax.blocks.KroneckerMass`
+            where the block is a scaled mass with one.
         inverse_diagonal: 1 / diag(A), shape (n,).
         preconditioner: (c_m M)⁻¹ (:class:`MassPreconditioner`), or ``None``.
         rtol: η, the relative residual each solve stops at (:func:`linear_tolerance`).
@@ -134,7 +140,7 @@ class KrylovOperator(AbstractFactorisation):
         valid: False for the placeholder a run with a held operator starts with.
     """
 
-    A: NodeBlockMatrix
+    A: NodeBlockMatrix | KroneckerMass
     inverse_diagonal: Vector
     rtol: Scalar
     K_norm: Scalar
@@ -143,9 +149,10 @@ class KrylovOperator(AbstractFactorisation):
     preconditioner: MassPreconditioner | None = None
 
     @classmethod
-    def of(cls, A: NodeBlockMatrix, K_norm: Scalar, C_norm: Scalar, rtol: Scalar,
+    def of(cls, A: NodeBlockMatrix | KroneckerMass, K_norm: Scalar, C_norm: Scalar, rtol: Scalar,
            preconditioner: MassPreconditioner | None = None) -> "KrylovOperator":
-        return cls(A=A, inverse_diagonal=1.0 / A.diagonal(), rtol=jnp.asarray(rtol, A.blocks.dtype),
+        diagonal = A.diagonal()
+        return cls(A=A, inverse_diagonal=1.0 / diagonal, rtol=jnp.asarray(rtol, diagonal.dtype),
                    K_norm=K_norm, C_norm=C_norm, valid=jnp.ones((), bool), preconditioner=preconditioner)
 
     def forcing(self, b: Vector, bound: Scalar | None) -> Scalar:
@@ -226,7 +233,7 @@ class KrylovHeld(KrylovFresh):
         blocks = M.combine(0.0, M, 0.0)
         return KrylovOperator(A=blocks, inverse_diagonal=jnp.zeros((model.n_dof,), dtype), rtol=zero,
                               K_norm=zero, C_norm=zero, valid=jnp.zeros((), bool),
-                              preconditioner=mass_preconditioner(mass_inverse(model, dtype), 1.0))
+                              preconditioner=mass_preconditioner(kronecker_mass(model, dtype), 1.0))
 
 
 class KrylovConstant(AbstractIterationMatrix):
@@ -252,7 +259,7 @@ def element_top_left(model: Model, ops, q: Vector, c_m, c_k):
     assert isinstance(ops.mass, ElementMass), "element blocks need a matrix-free model's operators"
     K = model.element_stiffness(q).node_blocks()
     return (ops.mass.M.combine(c_m, K, c_k), K.frobenius_norm(), jnp.zeros((), q.dtype),
-            mass_preconditioner(ops.mass.inverse, c_m))
+            mass_preconditioner(ops.mass.kronecker, c_m))
 
 
 KRYLOV_KINDS = (KrylovFresh, KrylovConstant)

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, Vector
-from ..blocks import NodeBlockMatrix, NodeRows, TensorMassInverse
+from ..blocks import KroneckerMass, NodeBlockMatrix, NodeRows
 from ..models.base import Model
 from .linalg import band_product
 
@@ -92,20 +92,22 @@ class ElementMass(AbstractMass):
     Attributes:
         M: the mass matrix as node blocks (:class:`~nsga_jax.blocks.NodeBlockMatrix`, n × n).
         M_norm: its Frobenius norm.
-        inverse: M⁻¹ where the model has an exact one that costs O(n)
-            (:meth:`~nsga_jax.models.Model.mass_inverse`), else ``None``.
+        kronecker: M as a Kronecker product where the model has one
+            (:meth:`~nsga_jax.models.Model.kronecker_mass`), else ``None``:
+            its products then skip the node blocks, and its exact inverse
+            preconditions the iteration matrices.
     """
 
     M: NodeBlockMatrix
     M_norm: Scalar
-    inverse: TensorMassInverse | None = None
+    kronecker: KroneckerMass | None = None
     is_constant: ClassVar[bool] = True
 
     def matrix(self, model: Model, q: Vector) -> Matrix:
         raise TypeError("a matrix-free model's mass is never assembled")
 
     def product(self, model: Model, q: Vector, x: Vector) -> Vector:
-        return self.M.mv(x)
+        return self.M.mv(x) if self.kronecker is None else self.kronecker.mv(x)
 
     def norm(self, model: Model, q: Vector) -> Scalar:
         return self.M_norm

@@ -33,8 +33,8 @@ from .krylov import (
     KrylovFresh,
     KrylovHeld,
     KrylovOperator,
+    kronecker_mass,
     linear_tolerance,
-    mass_inverse,
     mass_preconditioner,
 )
 from .linalg import band_matrix
@@ -212,7 +212,7 @@ def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
     real = jnp.result_type(t0, float)
     zeros = jnp.zeros((model.n_dof,), real)
     M = model.element_mass(zeros).node_blocks()
-    inverse = mass_inverse(model, real)
+    kronecker = kronecker_mass(model, real)
     rtol = linear_tolerance(tol_r, real)
     constraints: AbstractConstraintJacobian = VaryingJacobian()
     if model.n_constraints:
@@ -227,11 +227,14 @@ def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
             return kind()
         assert top_left is not None
         c_m, c_k = top_left(1.0, 0.0, 0.0), top_left(0.0, 1.0, 0.0)  # type: ignore[arg-type]
-        K = model.element_stiffness(zeros).node_blocks() if model.linear_force else M.combine(0.0, M, 0.0)
         zero = jnp.zeros((), real)
+        preconditioner = mass_preconditioner(kronecker, c_m)
+        if not model.linear_force and preconditioner is not None:  # A = c_m M: its Kronecker form
+            return KrylovConstant(KrylovOperator.of(preconditioner.mass, zero, zero, rtol, preconditioner))
+        K = model.element_stiffness(zeros).node_blocks() if model.linear_force else M.combine(0.0, M, 0.0)
         return KrylovConstant(KrylovOperator.of(M.combine(c_m, K, c_k), K.frobenius_norm(), zero, rtol,
-                                                mass_preconditioner(inverse, c_m)))
+                                                preconditioner))
 
     smooth, position, velocity = (build(kind, top_left) for kind, top_left in zip(kinds, top_lefts))
-    return Operators(mass=ElementMass(M, M.frobenius_norm(), inverse), force=NonlinearForce(), constraints=constraints,
-                     smooth=smooth, position=position, velocity=velocity)
+    return Operators(mass=ElementMass(M, M.frobenius_norm(), kronecker), force=NonlinearForce(),
+                     constraints=constraints, smooth=smooth, position=position, velocity=velocity)

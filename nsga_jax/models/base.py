@@ -30,7 +30,7 @@ import numpy as np
 from jax import lax
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
-from ..blocks import ElementMatrix, NodeRows, TensorMassInverse
+from ..blocks import ElementMatrix, KroneckerMass, NodeRows
 from ..results import ConfigError
 from ..validation import Range, integer
 
@@ -155,9 +155,10 @@ class Model(eqx.Module):
         """K(q) = -df/dq as element blocks, never assembled (matrix-free models)."""
         raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
 
-    def mass_inverse(self) -> TensorMassInverse | None:
-        """An exact M⁻¹ that costs O(n) (a matrix-free model with a constant,
-        structured mass), which preconditions its iteration matrices, or ``None``."""
+    def kronecker_mass(self) -> KroneckerMass | None:
+        """M as a Kronecker product, whose product and exact inverse cost O(n)
+        (a matrix-free model with a constant, structured mass): the inverse
+        preconditions its iteration matrices. ``None`` where M has no such form."""
         return None
 
     def constraint_rows(self, q: Vector) -> NodeRows:

@@ -155,6 +155,15 @@ def _check_matrix_free(model: Model, states, masses, stiffness, jacobians, fail)
                 if _differ(form.dense(), dense) > 1e-6:
                     fail(name, f"its blocks differ from the assembled matrix by {_differ(form.dense(), dense):.2e} "
                                "(relative)")
+    kronecker = model.kronecker_mass()
+    if kronecker is not None:
+        n = model.n_dof
+        identity = jnp.eye(n, dtype=masses[0].dtype)
+        for name, dense, reference in (("product", jax.vmap(kronecker.mv)(identity), masses[0]),
+                                       ("inverse", jax.vmap(kronecker.solve)(masses[0]), identity)):
+            if _differ(dense, reference) > 1e-6:
+                fail("kronecker_mass", f"its {name} differs from the assembled mass by {_differ(dense, reference):.2e} "
+                                       "(relative)")
     if jacobians:
         rows = model.constraint_rows(states[0][0])
         if _differ(rows.dense(), jacobians[0]) > RELATIVE:

@@ -50,10 +50,10 @@ def element_mass(model, q: Vector) -> ElementMatrix:
     return model.bodies[0].element_mass(q)
 
 
-def mass_inverse(model):
-    """The exact M⁻¹ of the system's one body where it has one (a box solid), else ``None``."""
+def kronecker_mass(model):
+    """The system's one body's M as a Kronecker product where it has one (a box solid), else ``None``."""
     body = model.bodies[0]
-    return body.mass_inverse() if hasattr(body, "mass_inverse") else None
+    return body.kronecker_mass() if hasattr(body, "kronecker_mass") else None
 
 
 def element_stiffness(model, q: Vector) -> ElementMatrix:

@@ -121,7 +121,7 @@ class SystemModel(Model):
     matrix_free = property(large.is_matrix_free)  # type: ignore[assignment]
     element_mass = large.element_mass
     element_stiffness = large.element_stiffness
-    mass_inverse = large.mass_inverse  # type: ignore[assignment]
+    kronecker_mass = large.kronecker_mass  # type: ignore[assignment]
     constraint_rows = large.constraint_rows
 
     @property

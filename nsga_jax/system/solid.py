@@ -14,7 +14,7 @@ import numpy as np
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
-from ..blocks import ElementMatrix, TensorMassInverse
+from ..blocks import ElementMatrix, KroneckerMass
 from ..elements.hex8 import (
     hex8_body_force,
     hex8_geometry,
@@ -164,9 +164,10 @@ class HexSolid(AbstractBody):
         """K(q) element by element (never assembled)."""
         return hex8_stiffness_blocks(self.elements, q, self.n_dof)
 
-    def mass_inverse(self) -> TensorMassInverse:
-        """M⁻¹ exactly, by its tensor-product structure (a box of equal elements, uniform ρ)."""
-        return TensorMassInverse.of_box(self.size, self.divisions, self.rho)
+    def kronecker_mass(self) -> KroneckerMass:
+        """M as a Kronecker product of 1D masses (a box of equal elements,
+        uniform ρ), with an exact O(n) product and inverse."""
+        return KroneckerMass.of_box(self.size, self.divisions, self.rho)
 
     def node_dofs(self, nodes: tuple[int, ...]) -> np.ndarray:
         """The coordinates (k, 3) of the nodes ``nodes`` (static): x, y, z of each."""
