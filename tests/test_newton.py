@@ -106,7 +106,8 @@ KINDS = {  # the DS iteration matrices (smooth, position, velocity) each scene's
     "rigid_box": ("Refactored", "Refactored", "ConstantInverse"),  # curved joints: M + h C is still constant
     "rigid_pendulum": ("Refactored", "Refactored", "ConstantInverse"),
     "flexible_pendulum": ("Refactored",) * 3,  # nonlinear beam of 27 coordinates
-    "flexible_cube": ("Held",) * 3,  # nonlinear solid of at least reuse_min_dof coordinates
+    # a matrix-free solid of at least krylov_min_dof coordinates: blocks held, the velocity jump's c_m M constant
+    "flexible_cube": ("KrylovHeld", "KrylovHeld", "KrylovConstant"),
     "newtons_cradle": ("ConstantInverse",) * 3,  # point masses on a line, affine contacts
     "double_pendulum": ("Refactored", "Refactored", "ConstantInverse"),  # pins on rotating rods
     "slider_crank": ("Refactored",) * 3,  # flexible rod: M + h C changes with the beam's tangents

@@ -56,16 +56,15 @@ from .model_terms import ElementMass
 KAPPA = 0.1
 """A linear solve's residual relative to eq. 51's bound (see the module docstring)."""
 
-KRYLOV_MIN_DOF: int | None = 1000
+KRYLOV_MIN_DOF: int | None = 500
 """The size from which DS solves a matrix-free model without assembling
-(:attr:`~nsga_jax.integrators.ds.DS.krylov_min_dof`): measured on the
-flexible cube landing (``experiments/benchmarks/bench_krylov.py``, 2-core
-CPU, float64), the dense path is faster at 192 coordinates (4.3 against
-6.4 ms a step), the two are even at 648 (13.4 and 12.3 ms), and the
-matrix-free one is 5 times faster at 1,536 (0.099 against 0.021 s) and 9 at
-3,000 (diagonal preconditioner). With the exact mass inverse it is faster
-from 648 on (6.0 against 13.8 ms a step); the default stays above the
-paper's cube (648) so that its runs are unchanged."""
+(:attr:`~nsga_jax.integrators.ds.DS.krylov_min_dof`), between the sizes
+where the paths measured even and where the matrix-free one is faster: on
+the flexible cube landing (``experiments/benchmarks/bench_krylov.py``,
+2-core CPU, float64) the dense path is faster at 192 coordinates (3.3
+against 4.3 ms a step), the two are even at 375 (5.4 and 5.3 ms), and the
+matrix-free one is faster from 648 on (10.2 against 5.6 ms at the paper's
+cube, 0.076 against 0.0086 s at 1,536)."""
 
 MAX_FORCING = 0.1
 """The loosest relative residual of a linear solve (the first updates of a
