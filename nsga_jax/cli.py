@@ -53,8 +53,9 @@ def _run(args) -> int:
     from .saveat import SaveAt
 
     if not args.quiet:
+        setting = f"theta = {s['theta']:g}" if s["scheme"] == "mj" else f"rho_inf = {s['rho_inf']:g}"
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
-              f"rho_inf = {s['rho_inf']:g}, {s['dtype']}; output in {out}", file=sys.stderr)
+              f"{setting}, {s['dtype']}; output in {out}", file=sys.stderr)
     failure = None
     saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # every step on disk as it finishes
     try:

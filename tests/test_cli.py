@@ -38,6 +38,15 @@ def test_run_writes_results(tmp_path, capsys):
     assert "500 steps" in capsys.readouterr().out
 
 
+def test_run_names_the_setting_of_its_scheme(tmp_path, capsys):
+    """The first line names θ for Moreau–Jean and ρ∞ for the generalized-α schemes."""
+    for scheme, setting, other in (("mj", "theta = 0.5", "rho_inf"), ("ds", "rho_inf = ", "theta")):
+        assert main(["run", "bouncing_ball", "--t-end", "0.01", "--scheme", scheme,
+                     "--out", str(tmp_path / scheme)]) == 0
+        first = capsys.readouterr().err.splitlines()[0]
+        assert setting in first and other not in first, first
+
+
 def _cli(args: list[str], cache) -> dict:
     env = {**os.environ, "NSGA_JAX_CACHE": str(cache)}
     proc = subprocess.run([sys.executable, "-m", "nsga_jax.cli", *args, "--quiet"], env=env, capture_output=True,

@@ -129,9 +129,9 @@ def test_the_switch_follows_the_model_structure_and_size():
     assert dataclasses.replace(ds, krylov_min_dof=0, fast_paths=False).matrix_kinds(model)[0] is not KrylovFresh
     dsn = dataclasses.replace(nsga_jax.DSn(), krylov_min_dof=0)
     assert dsn.matrix_kinds(model) == (KrylovHeld, KrylovConstant, KrylovConstant)  # S_t^p = M without h² K
-    # friction, other scenes: never matrix-free
+    # friction, other scenes: never matrix-free (the bar is: test_bar_matches_its_tridiagonal_path)
     assert not cube(3, mu=0.3).model.matrix_free
-    for name in ("impacting_bar", "bouncing_ball", "rigid_box", "flexible_pendulum"):
+    for name in ("bouncing_ball", "rigid_box", "flexible_pendulum"):
         assert not load_scene(name).model.matrix_free, name
     assert dense_matrices(model, dataclasses.replace(ds, krylov_min_dof=0)) == 0
 
@@ -158,6 +158,22 @@ def test_cube_matches_the_dense_path_at_the_default_tolerance():
     scheme = scene.scheme()
     krylov, dense = run_both(scene, scheme)
     assert_same_run(krylov, dense, atol=10 * float(scheme.tol_r))
+
+
+def test_bar_matches_its_tridiagonal_path():
+    """The bar on node blocks of width 1 with the diagonal preconditioner
+    (no Kronecker mass) against its block elimination, through the impact;
+    a chain stays on its band by default, however long."""
+    scene = load_scene("impacting_bar", {"gap": 0.01, "h": 1e-3, "t_end": 0.05})
+    scheme = scene.scheme()
+    model = scene.model
+    assert model.matrix_free and model.kronecker_mass() is None
+    assert dataclasses.replace(scheme, krylov_min_dof=0).matrix_kinds(model) == (KrylovConstant,) * 3
+    long_bar = load_scene("impacting_bar", {"n_elements": 2000}).model
+    assert not scheme.matrix_free(long_bar) and scheme.matrix_kinds(long_bar)[0].__name__ == "ConstantTridiagonal"
+    krylov, dense = run_both(scene, scheme)
+    assert_same_run(krylov, dense, atol=10 * float(scheme.tol_r))
+    np.testing.assert_allclose(krylov.v, dense.v, rtol=0, atol=10 * float(scheme.tol_r) * float(np.abs(dense.v).max()))
 
 
 @pytest.mark.slow

@@ -40,7 +40,7 @@ from .friction import projection_start
 from .krylov import KRYLOV_MIN_DOF, KrylovOperator, kronecker_mass, linear_tolerance, mass_preconditioner
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
-from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
+from .operators import MatrixKinds, Operators, banded, matrix_kinds, prepare_operators
 from .records import (
     NewtonRecord,
     PositionAux,
@@ -138,9 +138,11 @@ class DS(AbstractGenAlpha):
 
     def matrix_free(self, model: Model) -> bool:
         """Whether a run of ``model`` assembles no matrix (static): fast paths,
-        a matrix-free model and at least ``krylov_min_dof`` coordinates."""
+        a matrix-free model and at least ``krylov_min_dof`` coordinates; a
+        banded one (a chain, already solved on its band in O(n),
+        :func:`~nsga_jax.integrators.operators.banded`) only with ``krylov_min_dof = 0``."""
         return (self.fast_paths and self.krylov_min_dof is not None and model.matrix_free
-                and model.n_dof >= self.krylov_min_dof)
+                and model.n_dof >= self.krylov_min_dof and (self.krylov_min_dof == 0 or not banded(model)))
 
     def reused(self, model: Model) -> tuple[bool, bool, bool]:
         """Which sub-problems (smooth, position, velocity) keep a factorisation

@@ -15,6 +15,7 @@ import numpy as np
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
+from ..blocks import ElementMatrix
 from ..elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
 from ..elements.beam2d import beam_energy, beam_internal_force, beam_mass
 from ..models.base import count_rule
@@ -250,6 +251,22 @@ class Bar(AbstractBody):
 
     def tangents(self, q: Vector, v: Vector) -> tuple[Matrix, Matrix]:
         return self.elements.tangents(bar_internal_force, q, v, self.n_dof, velocity_dependent=False)
+
+    def element_mass(self, q: Vector) -> ElementMatrix:
+        """M element by element (never assembled), one coordinate a node."""
+        group = self.elements
+        return ElementMatrix(jax.vmap(self._element_mass)(group.params), group.dofs, self.n_dof)
+
+    def element_stiffness(self, q: Vector) -> ElementMatrix:
+        """K = EA / l_e [[1, -1], [-1, 1]] element by element (constant, never assembled)."""
+        group = self.elements
+        EA, le, _ = group.params
+        unit = jnp.array([[1.0, -1.0], [-1.0, 1.0]], jnp.result_type(EA, le))
+        return ElementMatrix((EA / le)[:, None, None] * unit, group.dofs, self.n_dof)
+
+    def node_dofs(self, nodes: tuple[int, ...]) -> np.ndarray:
+        """The coordinates (k, 1) of the nodes ``nodes`` (static): the axial displacement of each."""
+        return (np.asarray(nodes) % self.n_nodes)[:, None]
 
     def strain_energy(self, q: Vector) -> Scalar:
         """Σ_e EA (u_{e+1} - u_e)² / (2 l_e) [J]."""

@@ -3,7 +3,8 @@ node by node, for large flexible models solved without assembling
 (:attr:`~nsga_jax.models.Model.matrix_free`, :mod:`~nsga_jax.integrators.krylov`).
 
 A system is matrix-free when it is one body that gives element blocks and
-node coordinates (a :class:`~nsga_jax.system.HexSolid`), with forces that
+node coordinates (a :class:`~nsga_jax.system.HexSolid` or a
+:class:`~nsga_jax.system.Bar`), with forces that
 do not depend on the state (gravity), no joints, and only frictionless
 :class:`~nsga_jax.system.PlaneContact` s on its nodes, no node in two
 contacts: each contact row is then the plane's unit normal on one node's
