@@ -21,10 +21,15 @@ from .validation import check_model_fields, describe, integer, real, require_ins
 
 def check_scheme(scheme) -> None:
     """A scheme instance with tolerances in (0, inf), an integer iteration cap
-    >= 1 and its own settings in their ranges (concrete values only: traced
-    settings are checked where they were made)."""
+    >= 1, integer sizes >= 0 for DS's fast paths (``krylov_min_dof`` may be
+    ``None``) and its own settings in their ranges (concrete values only:
+    traced settings are checked where they were made)."""
     require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
     integer("max_iter", scheme.max_iter, 1)
+    if hasattr(scheme, "reuse_min_dof"):
+        integer("reuse_min_dof", scheme.reuse_min_dof, 0)
+    if getattr(scheme, "krylov_min_dof", None) is not None:
+        integer("krylov_min_dof", scheme.krylov_min_dof, 0)
     settings = {"tol_r": (scheme.tol_r, 0.0, math.inf), "tol_f": (scheme.tol_f, 0.0, math.inf), **scheme.bounds()}
     for name, (value, lo, hi) in settings.items():
         if isinstance(value, jax.core.Tracer):

@@ -104,6 +104,9 @@ BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.5)
         ({"scheme": nj.DS(rho_inf=math.nan)}, r"rho_inf must be in \[0, 1\]"),
         ({"scheme": nj.DS(tol_r=-1.0)}, r"tol_r must be in \(0, inf\)"),
         ({"scheme": nj.DS(max_iter=0)}, r"max_iter must be an integer >= 1"),
+        ({"scheme": nj.DS(krylov_min_dof=-1)}, r"krylov_min_dof must be an integer >= 0, got -1"),
+        ({"scheme": nj.DSn(krylov_min_dof=1.5)}, r"krylov_min_dof must be an integer >= 0, got float 1.5"),
+        ({"scheme": nj.DS(reuse_min_dof=None)}, r"reuse_min_dof must be an integer >= 0, got None"),
     ],
 )
 def test_simulate_arguments_are_checked(kwargs, match):
