@@ -97,12 +97,19 @@ class ElementGroup(eqx.Module):
         """Assembled K = -df/dq and C = -df/dv from element-level ``jacfwd``
         (C is not formed, and returned as zeros, when ``velocity_dependent`` is False)."""
         xe, ve = self.gather(q), self.gather(v)
-        Ke = -_vmapped_jacobian(fn, 0)(xe, ve, self.params)
-        K = scatter_matrix(self.dofs, Ke, n)
+        K = scatter_matrix(self.dofs, self.stiffness_blocks(fn, q, v), n)
         if not velocity_dependent:
             return K, jnp.zeros_like(K)
         Ce = -_vmapped_jacobian(fn, 1)(xe, ve, self.params)
         return K, scatter_matrix(self.dofs, Ce, n)
+
+    def stiffness_blocks(self, fn: ElementForce, q: Vector, v: Vector) -> jax.Array:
+        """Element tangents K_e = -df_e/dx_e from element-level ``jacfwd``, shape (n_elements, k, k)."""
+        return -_vmapped_jacobian(fn, 0)(self.gather(q), self.gather(v), self.params)
+
+    def matrix_blocks(self, fn: Callable[[Any], jax.Array]) -> jax.Array:
+        """Element matrices ``fn(params_e)`` (e.g. mass), shape (n_elements, k, k)."""
+        return jax.vmap(fn)(self.params)
 
     def matrix_product(self, fn: Callable[[Any], jax.Array], x: Vector) -> Vector:
         """Assembled ``sum_e fn(params_e) @ x_e`` without forming the global matrix."""
@@ -111,7 +118,7 @@ class ElementGroup(eqx.Module):
 
     def matrix(self, fn: Callable[[Any], jax.Array], n: int) -> Matrix:
         """Assembled element matrices ``fn(params_e)`` (e.g. mass), shape (n, n)."""
-        return scatter_matrix(self.dofs, jax.vmap(fn)(self.params), n)
+        return scatter_matrix(self.dofs, self.matrix_blocks(fn), n)
 
 
 # A step evaluates the same element force (and its Jacobian) in several places

@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._custom_types import Matrix, Vector
-from .assembly import StaticIndex, scatter_matrix, scatter_vector
+from .assembly import ElementGroup, StaticIndex, scatter_matrix, scatter_vector
+from .elements.bar import bar_consistent_mass
 
 
 class ElementMatrix(eqx.Module):
@@ -234,13 +235,11 @@ class KroneckerMass(eqx.Module):
     @classmethod
     def of_box(cls, size: jax.Array, divisions: tuple[int, int, int], density: jax.Array) -> "KroneckerMass":
         """From the box's side lengths (3,) [m], its element counts (x, y, z) and ρ."""
-        def mass_1d(length, n):
-            h = length / n
-            nodes = np.arange(n + 1)
-            ends = (nodes == 0) | (nodes == n)
-            diagonal = jnp.where(jnp.asarray(ends), h / 3, 2 * h / 3)
-            off = jnp.full((n,), h / 6)
-            return jnp.diag(diagonal) + jnp.diag(off, 1) + jnp.diag(off, -1)
+        def mass_1d(length, n):  # n linear elements of unit density: the bar's consistent mass
+            le = jnp.broadcast_to(length / n, (n,))
+            chain = ElementGroup(StaticIndex(np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)),
+                                 (jnp.ones_like(le), le, jnp.ones_like(le)))
+            return chain.matrix(bar_consistent_mass, n + 1)
 
         x, y, z = (mass_1d(size[a], divisions[a]) for a in range(3))
         return cls((z, y, x), (jnp.linalg.inv(z), jnp.linalg.inv(y), jnp.linalg.inv(x)), jnp.asarray(density))

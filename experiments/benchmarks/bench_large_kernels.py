@@ -35,7 +35,13 @@ import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
 from nsga_jax.elements.hex8 import hex8_internal_force, hex8_stiffness, svk_energy  # noqa: E402
-from nsga_jax.integrators.krylov import MAX_STEPS, kronecker_mass, mass_preconditioner  # noqa: E402
+from nsga_jax.integrators.krylov import (  # noqa: E402
+    MAX_STEPS,
+    kronecker_mass,
+    mass_preconditioner,
+    on_range,
+    projection,
+)
 
 H, BETA = 1e-4, 0.3
 """The step [s] and a coefficient β' of the smooth motion's block M + β' h² K."""
@@ -112,19 +118,13 @@ def measure(divisions: int, repeats: int) -> list[dict]:
     K = model.element_stiffness(q).node_blocks()
     A = M.combine(1.0, K, BETA * H**2)
     pre = mass_preconditioner(kron, 1.0)
-    G = model.constraint_rows(q)  # the bottom face, landed: every row active
-
-    def project(v):
-        return v - G.T @ (G @ v)
-
-    def on_range(apply):
-        return lambda v: project(apply(project(v))) + (v - project(v))
-
-    operators = {"free": (A.mv, pre.apply), "projected on the landed face": (on_range(A.mv), on_range(pre.apply))}
+    project = projection(model.constraint_rows(q))  # the bottom face, landed: every row active
+    operators = {"free": (A.mv, pre.apply),
+                 "projected on the landed face": (on_range(project, A.mv), on_range(project, pre.apply))}
     smooth = A.mv(smooth_field(jnp.asarray(scene.q0)))
     for block, (mv, apply) in operators.items():
-        projection = (lambda v: v) if block == "free" else project
-        for label, b in {"random": projection(x), "smooth": projection(smooth)}.items():
+        onto = (lambda v: v) if block == "free" else project
+        for label, b in {"random": onto(x), "smooth": onto(smooth)}.items():
             for rtol in (1e-1, 1e-3, 1e-6):
                 def solve(b, start, mv=mv, apply=apply, rtol=rtol):
                     x0 = apply(b) if start else jnp.zeros_like(b)

@@ -49,25 +49,25 @@ def element_volume(X_e: jax.Array) -> jax.Array:
     return jnp.sum(hex8_geometry(X_e)[1])
 
 
-def svk_energy(x_e: jax.Array, p) -> jax.Array:
-    """Strain energy [J]: Σ_gp (λ/2 (tr E)² + μ E:E) dV, E = (FᵀF - I)/2."""
-    dNdX, dV, lam, mu, _ = p
-    F = jnp.einsum("ai,gaj->gij", x_e.reshape(8, 3), dNdX)
-    E = 0.5 * (jnp.einsum("gki,gkj->gij", F, F) - jnp.eye(3, dtype=F.dtype))
-    trE = jnp.trace(E, axis1=1, axis2=2)
-    W = 0.5 * lam * trE**2 + mu * jnp.sum(E * E, axis=(1, 2))
-    return jnp.sum(W * dV)
-
-
-def _deformation(x_e: jax.Array, p) -> tuple[jax.Array, jax.Array]:
-    """F and the second Piola–Kirchhoff stress S = λ tr(E) I + 2μ E [Pa] at the
-    Gauss points, each shape (8, 3, 3)."""
+def _deformation(x_e: jax.Array, p) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """F, the Green–Lagrange strain E = (FᵀF - I)/2 and the second
+    Piola–Kirchhoff stress S = λ tr(E) I + 2μ E [Pa] at the Gauss points,
+    each shape (8, 3, 3)."""
     dNdX, _, lam, mu, _ = p
     F = jnp.einsum("ai,gaj->gij", x_e.reshape(8, 3), dNdX)
     eye = jnp.eye(3, dtype=F.dtype)
     E = 0.5 * (jnp.einsum("gki,gkj->gij", F, F) - eye)
     S = lam * jnp.trace(E, axis1=1, axis2=2)[:, None, None] * eye + 2.0 * mu * E
-    return F, S
+    return F, E, S
+
+
+def svk_energy(x_e: jax.Array, p) -> jax.Array:
+    """Strain energy [J]: Σ_gp (λ/2 (tr E)² + μ E:E) dV, E = (FᵀF - I)/2."""
+    _, dV, lam, mu, _ = p
+    _, E, _ = _deformation(x_e, p)
+    trE = jnp.trace(E, axis1=1, axis2=2)
+    W = 0.5 * lam * trE**2 + mu * jnp.sum(E * E, axis=(1, 2))
+    return jnp.sum(W * dV)
 
 
 def hex8_internal_force(x_e: jax.Array, v_e: jax.Array, p) -> jax.Array:
@@ -77,7 +77,7 @@ def hex8_internal_force(x_e: jax.Array, v_e: jax.Array, p) -> jax.Array:
     energy for 8,000 elements on a 2-core CPU
     (``experiments/benchmarks/bench_large_kernels.py``)."""
     dNdX, dV = p[0], p[1]
-    F, S = _deformation(x_e, p)
+    F, _, S = _deformation(x_e, p)
     P = jnp.einsum("gij,gjk->gik", F, S) * dV[:, None, None]
     return -jnp.einsum("gik,gak->ai", P, dNdX).reshape(24)
 
@@ -94,7 +94,7 @@ def hex8_stiffness(x_e: jax.Array, p) -> jax.Array:
     56 ms for 1,000 elements on a 2-core CPU,
     ``experiments/benchmarks/bench_large_kernels.py``)."""
     dNdX, dV, lam, mu, _ = p
-    F, S = _deformation(x_e, p)
+    F, _, S = _deformation(x_e, p)
     g = jnp.einsum("gij,gaj->gai", F, dNdX)  # F ∇N_a
     geometric = jnp.einsum("g,gaj,gjl,gbl->ab", dV, dNdX, S, dNdX)
     grad_dot = jnp.einsum("gaj,gbj->gab", dNdX, dNdX)
@@ -110,7 +110,7 @@ def hex8_mass_blocks(group, n: int) -> ElementMatrix:
     """The consistent mass of a group of hex8 elements (an
     :class:`~nsga_jax.assembly.ElementGroup`), element by element, never
     assembled; n coordinates, 3 a node."""
-    return ElementMatrix(jax.vmap(hex8_mass)(group.params), group.dofs, n, 3)
+    return ElementMatrix(group.matrix_blocks(hex8_mass), group.dofs, n, 3)
 
 
 def hex8_stiffness_blocks(group, q: jax.Array, n: int) -> ElementMatrix:

@@ -190,18 +190,24 @@ class KrylovOperator(AbstractFactorisation):
             return super().bordered(r1, r2, G_up, G_low, active, k, p, bound)
         G = NodeRows(jnp.where(active[:, None], G_up.vals, 0.0), G_up.cols, G_up.n)  # G_a, zero rows inactive
 
-        def project(x):  # P x = x - G_aᵀ G_a x
-            return x - G.T @ (G @ x)
-
+        project = projection(G)
         fixed = G.T @ (jnp.where(active, r2, 0.0) / k)
         b = project(-r1 - self.A.mv(fixed))
-        def on_range(apply):  # P B P + (I - P): SPD, and P B P on the range of P
-            return lambda x: project(apply(project(x))) + (x - project(x))
-
-        z = cg(on_range(self.A.mv), b, on_range(self.precondition), self.forcing(b, bound))
+        z = cg(on_range(project, self.A.mv), b, on_range(project, self.precondition), self.forcing(b, bound))
         dx = fixed + project(z)
         dmu = jnp.where(active, (G @ (self.A.mv(dx) + r1)) / k, 0.0) + (p / k**2) * r2
         return dx, dmu
+
+
+def projection(G: NodeRows) -> Callable[[Vector], Vector]:
+    """P x = x - Gᵀ G x, the projection on the coordinates orthonormal rows G leave free."""
+    return lambda x: x - G.T @ (G @ x)
+
+
+def on_range(project: Callable[[Vector], Vector], apply: Callable[[Vector], Vector]) -> Callable[[Vector], Vector]:
+    """P B P + (I - P) for B = ``apply``: symmetric positive definite where B
+    is, and P B P on the range of P (a projected solve by conjugate gradients)."""
+    return lambda x: project(apply(project(x))) + (x - project(x))
 
 
 class KrylovFresh(AbstractIterationMatrix):

@@ -255,14 +255,12 @@ class Bar(AbstractBody):
     def element_mass(self, q: Vector) -> ElementMatrix:
         """M element by element (never assembled), one coordinate a node."""
         group = self.elements
-        return ElementMatrix(jax.vmap(self._element_mass)(group.params), group.dofs, self.n_dof)
+        return ElementMatrix(group.matrix_blocks(self._element_mass), group.dofs, self.n_dof)
 
     def element_stiffness(self, q: Vector) -> ElementMatrix:
-        """K = EA / l_e [[1, -1], [-1, 1]] element by element (constant, never assembled)."""
+        """K element by element (constant, never assembled), one coordinate a node."""
         group = self.elements
-        EA, le, _ = group.params
-        unit = jnp.array([[1.0, -1.0], [-1.0, 1.0]], jnp.result_type(EA, le))
-        return ElementMatrix((EA / le)[:, None, None] * unit, group.dofs, self.n_dof)
+        return ElementMatrix(group.stiffness_blocks(bar_internal_force, q, jnp.zeros_like(q)), group.dofs, self.n_dof)
 
     def node_dofs(self, nodes: tuple[int, ...]) -> np.ndarray:
         """The coordinates (k, 1) of the nodes ``nodes`` (static): the axial displacement of each."""
