@@ -37,7 +37,7 @@ from .batch import BatchRun, member_mesh, member_solution, same_structure, stack
 from .distributed import agree
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
 from .memory import check_fits
-from .metrics import relative_l1_error
+from .metrics import l1_errors
 from .monitors import RunTotals
 from .precision import cast_floats
 from .results import ConfigError
@@ -168,7 +168,7 @@ def _row(member: Member, sol: Solution) -> dict[str, Any]:
         exact = scene.exact(view.ts)
         for name in scene.spec.error_observables:
             if name in exact and name in obs:
-                row[f"error_{name}"] = relative_l1_error(obs[name], exact[name])
+                row[f"error_{name}"], row[f"abs_error_{name}"] = l1_errors(obs[name], exact[name])
     return row
 
 

@@ -38,6 +38,9 @@ _COUNTS = {
 def column_label(column: str, scene=None) -> str:
     """The axis label of a sweep column: errors ``[-]``, counts by what they
     count, penetration ``[m]``, observables and swept values in their units."""
+    if column.startswith("abs_error_"):
+        name = column[len("abs_error_"):]
+        return label(f"largest error of {name}", observable_unit(scene, name))
     if column.startswith("error_"):
         return label(f"error of {column[len('error_'):]} (eq. 52)", "")
     if column in _COUNTS:
@@ -66,6 +69,12 @@ def sweep_axis(rows_values: dict[str, np.ndarray]) -> str:
     if len(sweep_groups(rows_values, x)[1]) > MAX_LINES:
         x = min(varying, key=lambda k: len(sweep_groups(rows_values, k)[1]))
     return x
+
+
+def _number(value) -> float:
+    """A table cell as a float: a missing or empty cell (eq. 52 undefined for a
+    member whose reference is identically zero) is left out of the plot."""
+    return np.nan if value is None or value == "" else float(value)
 
 
 def _value_text(scene, name: str, value: float) -> str:
@@ -100,7 +109,7 @@ def sweep_figure(result, columns: Sequence[str], scene=None, scheme: str = ""):
     with style():
         fig, axes = figure(nrow, ncol, panel=(3.9, 2.9))
         for ax, col in zip(axes.flat, columns):
-            y = np.asarray([r.get(col, np.nan) for r in result.rows], dtype=float)
+            y = np.asarray([_number(r.get(col)) for r in result.rows], dtype=float)
             if joined:
                 for j, key in enumerate(keys):
                     sel = np.ones(x.size, bool)

@@ -302,3 +302,17 @@ def test_bad_sweep_settings():
 def test_cli_sweep_refuses_a_bad_step_size(tmp_path, capsys):
     assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--h", "abc", "--out", str(tmp_path / "s")]) == 2
     assert "--h expects comma-separated numbers" in capsys.readouterr().err
+
+
+def test_a_member_whose_exact_motion_is_zero_keeps_the_sweep_going(tmp_path):
+    """A block that sticks from rest (μ > tan 0.3 = 0.309) has s(t) = 0 exactly:
+    eq. 52 is undefined for it, so its relative error is left empty (the plot
+    skips it) and its largest absolute error is given; the sliding member keeps
+    eq. 52."""
+    res = sweep("incline", {"mu": [0.1, 0.5]}, overrides={"t_end": 0.3}, out=tmp_path / "s")
+    sliding, sticking = sorted(res.rows, key=lambda r: r["mu"])
+    assert sliding["error_s"] is not None and 0.0 <= sliding["error_s"] < 1e-2
+    assert sticking["error_s"] is None and sticking["error_ds"] is None
+    assert sticking["abs_error_s"] < 1e-12 and sticking["abs_error_ds"] < 1e-12
+    assert sliding["abs_error_s"] > 0.0
+    assert (tmp_path / "s" / "sweep.png").stat().st_size > 1000
