@@ -44,7 +44,7 @@ from .results import RESULTS, ConvergenceError, InvariantError, Result, from_cod
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .saveat import DEVICE_ONLY, SaveAt, refuse
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import choice, integer, require_instance, time_grid
+from .validation import choice, integer, refuse_traced, require_instance, time_grid
 
 # --------------------------------------------------------------------- the loop
 
@@ -182,8 +182,11 @@ def simulate(
             environment variable ``NSGA_JAX_SKIP_MEMORY_CHECK=1``) skips it.
 
     Everything is validated before anything is traced: wrong Python types
-    raise :class:`TypeError`, bad values :class:`ConfigError`.
+    raise :class:`TypeError`, bad values :class:`ConfigError`. Under
+    ``jax.grad``, ``jit`` or ``vmap`` (traced inputs) it refuses, naming
+    :func:`~nsga_jax.integrate`, the pure entry point with the same arguments.
     """
+    refuse_traced("nsga_jax.simulate", model=model, scheme=scheme, t0=t0, t1=t1, h=h, q0=q0, v0=v0)
     check_scheme(scheme)
     check_model_instance(model)
     dtype = choice("dtype", dtype, DTYPES)

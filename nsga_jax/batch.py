@@ -40,7 +40,7 @@ from .precision import DTYPES, cast_floats, require_x64_for
 from .results import ConfigError, Result
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import choice, describe, require_instance, time_grid
+from .validation import choice, describe, refuse_traced, require_instance, time_grid
 
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
@@ -312,6 +312,7 @@ def simulate_batch(
     sizes must then be a multiple of the mesh size); ``observables`` names
     quantities of each finished member, as in :func:`~nsga_jax.simulate`.
     """
+    refuse_traced("nsga_jax.simulate_batch", model=model, scheme=scheme, t0=t0, t1=t1, hs=hs, q0=q0, v0=v0)
     check_scheme(scheme)
     check_model_instance(model)
     dtype = choice("dtype", dtype, DTYPES)

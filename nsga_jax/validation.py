@@ -157,7 +157,8 @@ def time_grid(t0: Any, t1: Any, h: Any, dtype: str = "float64", *, t1_name: str 
 
 
 __all__ = ["MAX_STEPS", "POSITIVE", "SCHEME_NAMES", "UNIT_INTERVAL", "Range", "check_model_fields",
-           "choice", "describe", "integer", "interval_text", "real", "require_instance", "step_count", "time_grid"]
+           "choice", "describe", "integer", "interval_text", "real", "refuse_traced", "require_instance", "step_count",
+           "time_grid"]
 
 
 # ----------------------------------------------------------- models, schemes
@@ -170,6 +171,20 @@ def _concrete_leaves(tree):
 
     return [(p, x) for p, x in jax.tree_util.tree_leaves_with_path(tree)
             if eqx.is_inexact_array(x) and not isinstance(x, jax.core.Tracer)]
+
+
+def refuse_traced(driver: str, **inputs: Any) -> None:
+    """Raise :class:`TypeError` when a host driver (``simulate``, a batch) is
+    called under a JAX transformation (``jax.grad``, ``jit``, ``vmap``): its
+    loop runs on the host, chunk by chunk, and cannot be traced; the pure
+    :func:`~nsga_jax.integrate` takes the same arguments and is."""
+    import jax
+
+    for name, value in inputs.items():
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(value)):
+            raise TypeError(f"{driver} is a host driver and cannot be differentiated, jitted or vmapped ({name} "
+                            f"is traced); nsga_jax.integrate takes the same arguments and is one pure JAX "
+                            f"function for jax.grad, jit and vmap (docs/gradients.md)")
 
 
 def check_model_fields(model) -> None:

@@ -183,3 +183,25 @@ def test_integrate_with_members_sharded_over_two_devices():
                           timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert proc.stdout.startswith("ok")
+
+
+@pytest.mark.parametrize("transform", ["grad", "jit", "vmap"])
+@pytest.mark.parametrize("driver", ["simulate", "simulate_batch"])
+def test_host_drivers_under_a_transformation_name_integrate(transform, driver):
+    """simulate and simulate_batch run their loops on the host: traced inputs are
+    refused before anything compiles, with a TypeError that names integrate."""
+    def final_height(z0):
+        q0 = jnp.reshape(z0, (1,))
+        if driver == "simulate":
+            return nj.simulate(BALL, nj.DS(), 0.0, 0.01, 1e-3, q0, [0.0]).q[-1, 0]
+        return nj.simulate_batch(BALL, nj.DS(), 0.0, 0.01, [1e-3], q0, [0.0])[0].q[-1, 0]
+
+    apply = {"grad": jax.grad, "jit": jax.jit, "vmap": jax.vmap}[transform]
+    z0 = jnp.asarray([1.0, 2.0]) if transform == "vmap" else jnp.asarray(1.0)
+    with pytest.raises(TypeError, match=f"nsga_jax.{driver} is a host driver .* nsga_jax.integrate takes the same"):
+        apply(final_height)(z0)
+
+
+def test_an_adjoint_named_by_a_string_is_refused_with_the_instances():
+    with pytest.raises(TypeError, match=r"nsga_jax.DiscreteAdjoint\(\) or nsga_jax.ImpactTimeAdjoint\(\), got str"):
+        nj.integrate(BALL, nj.DS(), 0.0, 0.01, 1e-3, [1.0], [0.0], adjoint="discrete")
