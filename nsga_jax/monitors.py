@@ -20,6 +20,10 @@ import numpy as np
 
 from .results import Result
 
+CHAIN_WARNING = "impacts in sequence within one step"
+"""The start of the warning for a step in which one impact closed another
+contact (the step resolves them simultaneously)."""
+
 ENERGY_WARNING = "energy rise at an impact"
 """The start of the warning :func:`invariant_warnings` gives for energy
 created at an impact step (what ``strict`` turns into a failure)."""
@@ -84,6 +88,9 @@ class RunTotals:
     max_impact_energy_rise: float = -math.inf
     max_impact_energy_rise_step: int = 0
     impact_steps: int = 0
+    chained_steps: int = 0
+    first_chain: tuple[int, int, float, float] | None = None
+    recent_gaps: np.ndarray | None = None
 
     def start(self, energy0: float | None, kinetic0: float = 0.0) -> None:
         """The energy and the kinetic energy at t0 [J] (``None``: the model has
@@ -117,6 +124,7 @@ class RunTotals:
         gap = np.asarray(records.gap)
         if gap.size:
             self.min_gap = min(self.min_gap, float(gap.min()))
+            self._add_chains(gap, np.asarray(records.impulse), first_step)
         self.max_bilateral = max(self.max_bilateral, _absmax(records.bilateral))
         self.max_bilateral_rate = max(self.max_bilateral_rate, _absmax(records.bilateral_rate))
         if energies is not None and math.isfinite(self.energy_last):
@@ -144,6 +152,40 @@ class RunTotals:
                 self.max_impact_energy_rise = float(rise[i])
                 self.max_impact_energy_rise_step = first_step + i
         self.energy_last = float(energies[finite][-1]) if finite[-1] else self.energy_last
+
+    def start_gaps(self, gap0, gap_rate0, h: float) -> None:
+        """The unilateral gaps (nu,) [m] at t0 and their rates [m/s] there: the
+        first rows of the history that :meth:`_add_chains` reads (the row
+        before t0 extrapolated by one step h [s])."""
+        gap0 = np.asarray(gap0, float)
+        self.recent_gaps = np.stack([gap0 - h * np.asarray(gap_rate0, float), gap0])
+
+    def _add_chains(self, gap: np.ndarray, impulse: np.ndarray, first_step: int) -> None:
+        """Count the steps where an impact closed another contact within the
+        step: a contact that takes an impulse together with another, open at
+        the step's start (gap above round-off) and closing by its own motion
+        (its change over the step before) by less than half its gap. The step
+        then resolves in one simultaneous impact what happens in sequence (a
+        Newton's cradle whose gaps are shorter than a step's travel)."""
+        nu = gap.shape[1]
+        history = gap if self.recent_gaps is None else np.concatenate([self.recent_gaps, gap])
+        lead = len(history) - len(gap)
+        hit = impulse[:, impulse.shape[1] - nu:] != 0.0
+        floor = 1e3 * np.finfo(gap.dtype).eps * max(1.0, float(np.abs(history).max()))
+        for i in np.nonzero(hit.sum(axis=1) >= 2)[0]:
+            k = lead + i  # history row after this step
+            if k < 2:
+                continue
+            start, before = history[k - 1], history[k - 2]
+            own = 2.0 * start - before  # the gap at the step's end by the contact's own motion
+            chained = hit[i] & (start > floor) & (own > 0.5 * start)
+            if chained.any():
+                self.chained_steps += 1
+                if self.first_chain is None:
+                    j = int(np.argmax(chained))
+                    approach = float(np.max(np.where(hit[i] & ~chained, before - start, 0.0)))
+                    self.first_chain = (first_step + int(i), j, float(start[j]), approach)
+        self.recent_gaps = history[-2:]
 
     def iteration_stats(self) -> dict[str, dict[str, float | int]]:
         """Mean and max iterations (linear solves) per step of each sub-problem,
@@ -195,6 +237,14 @@ def invariant_warnings(totals: RunTotals, tol: Tolerances, h: float, t0: float =
     if totals.max_bilateral_rate > tol.bilateral_rate:
         out.append(f"bilateral rate violation: |g_q v| reached {totals.max_bilateral_rate:.3e} m/s "
                    f"(tolerance {tol.bilateral_rate:g} m/s)")
+    if totals.first_chain is not None:
+        step, j, gap, approach = totals.first_chain
+        limit = f"; resolve them in sequence with h below {h * gap / approach:.2g} s (the gap over the approach " \
+                f"speed)" if approach > 0 else ""
+        out.append(f"{CHAIN_WARNING}: in {totals.chained_steps} step(s), first step {step} (t = {t0 + step * h:.6g} "
+                   f"s), an impact closed contact {j} (open by {gap:.3g} m at the step's start) within the step, "
+                   f"and the step resolved both impacts at once: the simultaneous-impact answer, not the "
+                   f"sequence of binary impacts{limit}")
     if totals.has_energy and totals.impact_steps:
         rise = totals.max_impact_energy_rise
         scale = max(totals.energy_scale, 1e-300)
@@ -221,5 +271,5 @@ def coarse_step_warning(rate: float | None, h: float, tol: Tolerances) -> str | 
             f"met at the wrong point: reduce h below {tol.rotation_per_step / rate:.2g} s")
 
 
-__all__ = ["ENERGY_WARNING", "RunTotals", "Tolerances", "coarse_step_warning", "default_tolerances",
+__all__ = ["CHAIN_WARNING", "ENERGY_WARNING", "RunTotals", "Tolerances", "coarse_step_warning", "default_tolerances",
            "invariant_warnings"]

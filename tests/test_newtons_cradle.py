@@ -139,3 +139,19 @@ def test_collisions_inside_steps_shift_the_motion_by_less_than_a_step_each(cradl
     np.testing.assert_allclose(sol.observables["momentum"], p["mass"] * p["velocity"], rtol=4e-15)
     assert np.abs(sol.observables["energy"] - 0.5 * p["mass"] * p["velocity"] ** 2).max() < 1e-8 * 0.05
     assert min(sol.observables[f"gap{i}"].min() for i in range(1, n)) > -1e-12
+
+
+def test_gaps_shorter_than_a_step_warn_that_the_impacts_were_simultaneous():
+    """h v = 1e-4 m against gaps of 1e-6 m: ball 1 hits ball 2, which hits
+    ball 3, within one step; the step resolves both impacts at once and gives
+    the simultaneous answer [-1/3, 2/3, 2/3] (the sequence gives [0, 0, 1]):
+    the run says so, by name, with the step that resolves them in sequence.
+    With gaps the step resolves (1 mm), no such warning."""
+    with pytest.warns(nsga_jax.InvariantWarning, match="impacts in sequence within one step: in 1 step.*first "
+                      r"step 1 .*h below 1e-06 s"):
+        sol = load_scene("newtons_cradle", {"n_balls": 3, "gap": 1e-6, "h": 1e-4}).run()
+    np.testing.assert_allclose(sol.v[-1], [-1 / 3, 2 / 3, 2 / 3], atol=1e-9)
+    assert any(w.startswith("impacts in sequence") for w in sol.warnings)
+    sol = load_scene("newtons_cradle", {"n_balls": 3, "gap": 1e-3, "h": 1e-4}).run()
+    np.testing.assert_allclose(sol.v[-1], [0.0, 0.0, 1.0], atol=1e-9)
+    assert not any(w.startswith("impacts in sequence") for w in sol.warnings)
