@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 from pathlib import Path
@@ -356,8 +357,10 @@ def _config(args) -> int:
     if path is not None:
         raise ConfigError(f"config takes a scene name or a .py scene file, got the config file {args.scene!r}")
     text = REGISTRY[name].default_toml()
-    if name != str(args.scene):  # a scene file: the config names the file
-        text = text.replace(f'scene = "{name}"', f'scene = "{args.scene}"', 1)
+    if name != str(args.scene):  # a scene file: the config names it by its absolute path, read from anywhere
+        file, colon, chosen = str(args.scene).partition(".py:")
+        absolute = str(Path(file + ".py" if colon else file).expanduser().resolve()) + (f":{chosen}" if colon else "")
+        text = text.replace(f'scene = "{name}"', f"scene = {json.dumps(absolute)}", 1)
     print(text, end="")
     return 0
 

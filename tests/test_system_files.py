@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -438,3 +439,23 @@ def test_a_solid_face_names_its_contact_nodes(tmp_path):
     path.write_text(SOLID.replace('"bottom"', '"bottm"'))
     with pytest.raises(ConfigError, match=r"contacts\.floor: HexSolid has no face 'bottm'; its faces: left"):
         load_scene(path)
+
+
+def test_a_written_config_names_its_scene_file_from_anywhere(tmp_path, capsys, monkeypatch):
+    """nsga-jax config FILE.py > elsewhere/x.toml, run from a relative path, names
+    the file by its absolute path: the config reads back from another folder.
+    A config whose scene file is missing says so, not that it is a config."""
+    example = Path(__file__).resolve().parents[1] / "docs" / "examples" / "double_pendulum.py"
+    (tmp_path / "here").mkdir()
+    (tmp_path / "there").mkdir()
+    monkeypatch.chdir(tmp_path / "here")
+    assert main(["config", os.path.relpath(example)]) == 0
+    text = capsys.readouterr().out
+    assert f'scene = "{example}"' in text
+    (tmp_path / "there" / "dp.toml").write_text(text)
+    monkeypatch.chdir(tmp_path)
+    assert configure("there/dp.toml").spec.name == configure(example).spec.name
+    (tmp_path / "there" / "missing.toml").write_text('scene = "no_such_scene.toml"\n')
+    with pytest.raises(ConfigError, match=r"scene or config file '.*no_such_scene.toml' does not exist \(a config's "
+                                          r"scene is read relative to the config's folder"):
+        configure(tmp_path / "there" / "missing.toml")

@@ -269,9 +269,13 @@ def resolve_scene(name_or_path: str | Path, relative_to: Path | None = None) -> 
     if text.endswith(".toml"):
         from .system_file import is_system_file, load_system_file
 
-        path = Path(text)
+        path = Path(text).expanduser()
         if relative_to is not None and not path.is_absolute():
             path = relative_to / path
+        if not path.is_file():
+            where = f" (a config's scene is read relative to the config's folder, {str(relative_to)!r})" \
+                if relative_to is not None else ""
+            raise ConfigError(f"scene or config file {str(path)!r} does not exist{where}")
         if is_system_file(path):
             return load_system_file(path), None
         return "", path
