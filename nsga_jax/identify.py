@@ -51,12 +51,20 @@ class Identification:
     initial_fit: dict[str, np.ndarray] = field(default_factory=dict)
     gradient_norm: float = math.nan
     at_bounds: list[str] = field(default_factory=list)
+    noise_floor: float = 0.0
+    compass_steps: int = 0
 
     STOPS = {
         "gradient": "the projected gradient fell below gtol",
         "loss": "an iteration lowered the loss by less than ftol of its value",
         "max_steps": "the iteration cap (max_steps) was reached",
-        "line search": "no step along the search direction lowered the loss (failed line search)",
+        "minimum": "no step along the search direction lowered the loss, at a local minimum of the simulated loss: "
+                   "moving any parameter by 1e-6 of its start raises it (through impacts the loss is piecewise "
+                   "smooth on the step grid, and its jumps end line searches)",
+        "flat": "no step lowered the loss, where moving some parameter by 1e-6 of its start leaves it unchanged: "
+                "the loss is flat here, which is no fit (does an impact that the data show depend on it?)",
+        "noise": "the loss reached the data's noise floor (estimated from the data alone): no fit can come "
+                 "closer to data with this noise",
         "bound": "it stopped on a bound of the parameters' range where the gradient is zero: the loss is flat "
                  "there, which is no fit (start closer to the data, or fit fewer parameters)",
     }
@@ -65,7 +73,7 @@ class Identification:
     def converged(self) -> bool:
         """Whether the fit ended at a stationary point of the loss inside the
         parameters' ranges (or against a bound the gradient pushes into)."""
-        return self.stop in ("gradient", "loss")
+        return self.stop in CONVERGED_STOPS
 
     @property
     def stop_message(self) -> str:
@@ -77,13 +85,33 @@ class Identification:
                "iterations": self.iterations, "evaluations": self.evaluations,
                "stopped_by": self.stop, "converged": self.converged, "stop_message": self.stop_message,
                "at_bounds": self.at_bounds, "initial_loss": self.losses[0], "final_loss": self.losses[-1],
-               "gradient_norm": self.gradient_norm, "wall_time_s": self.wall_time_s,
+               "gradient_norm": self.gradient_norm, "noise_floor": self.noise_floor,
+               "compass_steps": self.compass_steps,
+               "wall_time_s": self.wall_time_s,
                "compile_time_s": self.compile_time_s}
         if self.true is not None:
             out["true"] = self.true
             out["relative_error"] = {k: abs(self.recovered[k] / self.true[k] - 1.0) if self.true[k] else
                                      abs(self.recovered[k]) for k in self.names}
         return out
+
+
+CONVERGED_STOPS = ("gradient", "loss", "minimum", "noise")
+"""The stops of a fit that fits: a stationary point of the loss, a local
+minimum of the simulated loss where the line search ends, or the data's noise floor."""
+
+NOISE_MARGIN = 1.5
+"""A fit whose loss is below this multiple of the data's noise floor fits the
+data to its noise (the mean square of n noisy samples scatters by sqrt(2/n)
+about σ², and the estimate of σ by a few per cent)."""
+
+COMPASS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
+"""The changes of one scaled parameter (its starting value is 1), largest
+first, that a fit tries where a line search failed (a compass search): the
+loss is piecewise smooth through impacts, and a jump on the gradient's path
+can end a line search away from a minimum. The first change that lowers the
+loss is taken; where none of the smallest does, the fit stands at a local
+minimum of the simulated loss at that resolution."""
 
 
 def _run(build, scheme, h, n_steps, p, adjoint):
@@ -170,6 +198,8 @@ def identify(
     ts = jnp.arange(n_steps + 1) * h
     targets = {k: jnp.asarray(v) for k, v in data.values.items()}
     weights = {k: 1.0 / max(float(np.mean(v**2)), 1e-300) for k, v in data.values.items()}
+    noise = data.noise_std()
+    noise_floor = sum(weights[k] * noise[k] ** 2 for k in targets)
 
     def loss_and_prediction(u):
         obs = _run(build, scheme, h, n_steps, {k: u[k] * scale[k] for k in names}, adjoint)
@@ -194,7 +224,7 @@ def identify(
     u = u0
     (value, pred), grad = evaluate(u)
     initial_fit = pred
-    losses, evaluations, stop = [float(value)], 1, "max_steps"
+    losses, evaluations, stop, compass_steps = [float(value)], 1, "max_steps", 0
     it = 0
     while it < max_steps:
         if not math.isfinite(losses[-1]):
@@ -220,8 +250,13 @@ def identify(
                 n += m
             evaluations += n
             if accepted is None:
-                stop = "line search"
-                break
+                accepted, m, flat = _compass(evaluate, advance, u, losses[-1], names)
+                evaluations += m
+                if accepted is None:
+                    stop = "flat" if flat else "minimum"
+                    break
+                compass_steps += 1
+                state = jax.tree.map(jnp.asarray, opt.init(accepted[0]))
             u, value, pred, grad = accepted
         losses.append(float(value))
         stalled = optimizer == "lbfgs" and losses[-2] - losses[-1] <= ftol * abs(losses[-2])
@@ -233,6 +268,8 @@ def identify(
             active = _at_bounds(u, bounds)
             stop = "bound" if _flat_bound(active, grad, losses, gtol) else "loss"
             break
+    if stop in ("flat", "max_steps") and losses[-1] <= NOISE_MARGIN * noise_floor:
+        stop = "noise"
     wall = time.perf_counter() - t0
     return Identification(
         names=list(names), initial=_to_values(u0, scale), recovered=_to_values(u, scale),
@@ -241,6 +278,7 @@ def identify(
         fitted={k: np.asarray(v) for k, v in pred.items()},
         initial_fit={k: np.asarray(v) for k, v in initial_fit.items()},
         gradient_norm=float(optax.tree.norm(grad)), at_bounds=sorted(_at_bounds(u, bounds)),
+        noise_floor=noise_floor, compass_steps=compass_steps,
     )
 
 
@@ -325,6 +363,29 @@ def _line_search(evaluate, advance, u, value, grad, step, trials: int = 30, c1: 
         if c_value < value and (best is None or c_value < best[1]):
             best = (candidate, c_value, c_pred, c_grad)
     return best, trials
+
+
+def _compass(evaluate, advance, u, value, names):
+    """A compass search where a line search failed: each parameter moved by
+    ±δ for δ in :data:`COMPASS`, largest first (projected on its range).
+    Returns ``((u, value, prediction, gradient) of the first move that lowers
+    the loss, or None; evaluations; whether a smallest move left the loss
+    unchanged, a flat loss)``."""
+    evaluations, flat = 0, False
+    for delta in COMPASS:
+        for k in names:
+            for sign in (1.0, -1.0):
+                step = {n: jnp.asarray(sign * delta if n == k else 0.0) for n in names}
+                candidate = advance(u, step, 1.0)
+                if all(float(candidate[n]) == float(u[n]) for n in names):  # against a bound
+                    continue
+                (c_value, c_pred), c_grad = evaluate(candidate)
+                evaluations += 1
+                c_value = float(c_value)
+                if c_value < value:
+                    return (candidate, c_value, c_pred, c_grad), evaluations, False
+                flat |= delta == COMPASS[-1] and abs(c_value - value) <= 1e-14 * abs(value)
+    return None, evaluations, flat
 
 
 def _scaled_bounds(spec, scale: float) -> tuple[float, float]:

@@ -4,12 +4,14 @@ line writes identification.json and plots; bad input is refused."""
 
 import json
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import nsga_jax as nj
 from nsga_jax import ConfigError
 from nsga_jax.cli import main
-from nsga_jax.identify import Data, identify, synthetic_data
+from nsga_jax.identify import COMPASS, NOISE_MARGIN, Data, Identification, _compass, identify, synthetic_data
 
 BALL = {"t_end": 1.0, "h": 2e-3}  # one impact (t ~ 0.45 s), 500 steps
 TRUE = {"e": 0.8, "height": 1.0}
@@ -125,3 +127,93 @@ def test_a_fit_stopped_on_a_flat_bound_is_reported_as_failed(monkeypatch, tmp_pa
     assert "error: the fit did not converge: stopped because it stopped on a bound" in capsys.readouterr().err
     report = json.loads((out / "identification.json").read_text())
     assert report["converged"] is False and report["stopped_by"] == "bound"
+
+
+def test_dotted_observable_names_survive_a_csv_round_trip(tmp_path):
+    """A system's observables are named part.quantity: the CSV header keeps the
+    dots, so identify finds them (the check after the observables' is the
+    parameter's, which this one fails)."""
+    data = Data(t=np.linspace(0, 1, 11), values={"lower.theta": np.linspace(1, 0, 11), "upper.x": np.ones(11)})
+    back = Data.load(data.save(tmp_path / "d.csv"))
+    assert list(back.values) == ["lower.theta", "upper.x"]
+    np.testing.assert_array_equal(back.values["lower.theta"], data.values["lower.theta"])
+    with pytest.raises(ConfigError, match="not a float parameter"):
+        identify("configs/systems/double_pendulum_wall.toml", ["no_such_parameter"], back)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("", "empty"),
+    ("t,z,z\n0,1,2\n", "distinct"),
+    ("t,z\n0,1\n1\n", "line 3: 1 values"),
+    ("t,z\n0,abc\n", "must be a number"),
+])
+def test_bad_csv_files_are_refused_by_name(tmp_path, text, match):
+    path = tmp_path / "d.csv"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=match):
+        Data.load(path)
+
+
+def test_noise_is_estimated_from_the_data_alone():
+    """σ of white noise on a bouncing ball's heights is recovered to 10 % by the
+    data's own neighbour residuals, and noise-free heights give σ ~ round-off
+    (the parabolas' curvature is constant between impacts)."""
+    t = np.linspace(0.0, 3.0, 3001)
+    z = np.abs(np.sin(2.0 * t)) * (1.0 - 0.1 * t)  # kinks where it bounces
+    rng = np.random.default_rng(0)
+    noisy = Data(t=t, values={"z": z + 0.003 * rng.normal(size=t.size)})
+    assert noisy.noise_std()["z"] == pytest.approx(0.003, rel=0.1)
+    parabola = Data(t=t, values={"z": 1.0 - 0.5 * 9.81 * (t % 0.5) ** 2})
+    assert parabola.noise_std()["z"] < 1e-12
+
+
+@pytest.mark.slow
+def test_a_fit_at_the_noise_floor_is_converged_whichever_adjoint():
+    """1 % noise on the ball's heights: both adjoints end at the data's noise
+    floor (estimated from the data alone, 1e-4 of the normalised loss) and say
+    they converged, with e within 0.1 % (the noise's own scatter)."""
+    data = synthetic_data("bouncing_ball", {"e": 0.63, "height": 1.0}, ["z"], noise=0.01, seed=1)
+    for adjoint in (nj.DiscreteAdjoint(), nj.ImpactTimeAdjoint()):
+        result = identify("bouncing_ball", ["e"], data, overrides={"height": 1.0}, initial={"e": 0.819},
+                          adjoint=adjoint)
+        assert result.noise_floor == pytest.approx(1e-4, rel=0.1)
+        assert result.losses[-1] < NOISE_MARGIN * result.noise_floor
+        assert result.converged, result.stop_message
+        assert abs(result.recovered["e"] / 0.63 - 1) < 1e-3
+
+
+def _fake_evaluate(loss):
+    """An ``evaluate`` of one scaled parameter ``x`` for the search helpers."""
+    def evaluate(u):
+        return (loss(float(u["x"])), {}), {"x": 0.0}
+    return evaluate
+
+
+def _advance(u, step, alpha):
+    return {k: jnp.clip(u[k] + alpha * step[k], 0.0, 2.0) for k in u}
+
+
+@pytest.mark.parametrize("loss, x, found", [
+    (lambda x: abs(x - 1.0) + (0.1 if x > 1.0 else 0.0), 1.0, "minimum"),  # a kink with a jump
+    (lambda x: 0.0 if x < 1.0 + 1e-3 else 1.0, 1.0, "flat"),  # a plateau
+    (lambda x: (x - 1.5) ** 2, 1.0, 1.01),  # smooth, still falling toward 1.5: the largest move
+    (lambda x: (x - 1.00002) ** 2, 1.0, 1.00001),  # a minimum 2e-5 away: the move of 1e-5
+    (lambda x: x, 0.0, "minimum"),  # against the lower bound, the loss rising inside
+])
+def test_a_failed_line_search_searches_the_compass_until_a_minimum(loss, x, found):
+    accepted, evaluations, flat = _compass(_fake_evaluate(loss), _advance, {"x": jnp.asarray(x)}, loss(x), ["x"])
+    if isinstance(found, str):
+        assert accepted is None and flat is (found == "flat")
+        assert evaluations == (len(COMPASS) if x == 0.0 else 2 * len(COMPASS))
+    else:
+        assert float(accepted[0]["x"]) == pytest.approx(found, abs=1e-12) and accepted[1] < loss(x)
+
+
+def test_stops_name_what_they_mean():
+    base = dict(names=["e"], initial={"e": 0.8}, recovered={"e": 0.63}, true=None, losses=[1.0, 1e-4],
+                iterations=5, evaluations=20, wall_time_s=1.0, compile_time_s=1.0)
+    for stop, converged, says in [("minimum", True, "local minimum of the simulated loss"),
+                                  ("noise", True, "noise floor"), ("flat", False, "the loss is flat here"),
+                                  ("max_steps", False, "iteration cap")]:
+        result = Identification(stop=stop, **base)
+        assert result.converged is converged and says in result.stop_message
