@@ -94,9 +94,9 @@ def command_parser() -> argparse.ArgumentParser:
     ident.add_argument("--every", type=int, default=1, help="--synthetic: keep every n-th step as a sample")
     ident.add_argument("--seed", type=int, default=0, help="--synthetic: seed of the noise")
     ident.add_argument("--optimizer", choices=("lbfgs", "adam"), default="lbfgs")
-    ident.add_argument("--adjoint", choices=("event", "discrete"), default="event",
-                       help="gradients that see impact instants move (default), or the time-stepping "
-                            "map's own derivative")
+    ident.add_argument("--adjoint", choices=("discrete", "event"), default="discrete",
+                       help="the simulated loss's own derivative (default: fewer evaluations for the same "
+                            "fits, docs/gradients.md), or gradients that see impact instants move")
     ident.add_argument("--max-steps", type=int, default=100, help="optimiser iterations at most")
     ident.add_argument("--learning-rate", type=float, default=0.05, help="Adam's step (scaled parameters)")
     ident.add_argument("--h", type=float, help="step size [s]")

@@ -26,7 +26,10 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import nsga_jax as nj  # noqa: E402
 from nsga_jax.identify import Data, identify, synthetic_data, write_identification  # noqa: E402
+
+ADJOINT = nj.ImpactTimeAdjoint()  # the adjoint of the committed table (recorded in commit 4670a9a)
 from nsga_jax.scenes import load_scene  # noqa: E402
 
 FIGURES = Path("docs/figures")
@@ -54,7 +57,7 @@ def run_case(name: str, out: Path) -> dict:
     for names, stage_observables in stages:
         stage_data = Data(t=data.t, values={k: data.values[k] for k in stage_observables})
         print(f"{name}: fitting {', '.join(names)} to {', '.join(stage_observables)}", flush=True)
-        result = identify(scene, names, stage_data, overrides={**overrides, **current}, true=true,
+        result = identify(scene, names, stage_data, overrides={**overrides, **current}, true=true, adjoint=ADJOINT,
                           progress=True)
         current.update(result.recovered)
         stage_summaries.append({"parameters": names, "observables": stage_observables, **{
@@ -109,7 +112,7 @@ def bar_checks() -> dict:
         return float(jnp.sqrt(jnp.mean((a - b) ** 2) / jnp.mean(b**2)))
 
     data = synthetic_data(scene, {**overrides, **true}, observables, noise=NOISE, seed=1, every=every)
-    joint = identify(scene, ["E", "e"], data, overrides={**overrides, **initial}, true=true)
+    joint = identify(scene, ["E", "e"], data, overrides={**overrides, **initial}, true=true, adjoint=ADJOINT)
     out = {"e_change": {"from": true["e"], "to": initial["e"], "tip_u_rms_change": rel(u_e, u_true),
                         "tip_v_rms_change": rel(v_e, v_true)},
            "joint_fit_from_initial": {k: joint.summary()[k] for k in ("recovered", "relative_error", "iterations",
