@@ -215,7 +215,8 @@ def simulate(
     run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
                                     v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
                                     on_chunk=on_chunk, record_every=record_every, dtype=dtype)
-    frictional_restitution = bool(model.n_friction) and bool(np.any(np.asarray(model.restitution) > 0))
+    frictional_restitution = (bool(model.n_friction) and bool(np.any(np.asarray(model.restitution) > 0))
+                              and getattr(scheme, "impact_law", "newton") != "energetic")  # the option is in use
     warnings += invariant_warnings(totals, tolerances, h, t0, frictional_restitution)
     for message in warnings:
         _warnings.warn(message, InvariantWarning, stacklevel=2)

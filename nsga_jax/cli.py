@@ -39,7 +39,7 @@ def _run(args) -> int:
 
     overrides = dict(parse_override(s) for s in args.set)
     for key, value in (("h", args.h), ("t_end", args.t_end), ("rho_inf", args.rho_inf), ("scheme", args.scheme),
-                       ("dtype", args.dtype), ("record_every", args.record_every)):
+                       ("dtype", args.dtype), ("record_every", args.record_every), ("impact_law", args.impact_law)):
         if value is not None:
             overrides[key] = value
     if args.chunk is not None:
@@ -55,8 +55,9 @@ def _run(args) -> int:
 
     if not args.quiet:
         setting = f"theta = {s['theta']:g}" if s["scheme"] == "mj" else f"rho_inf = {s['rho_inf']:g}"
+        law = f", impact_law = {s['impact_law']}" if s["impact_law"] != "newton" else ""
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
-              f"{setting}, {s['dtype']}; output in {out}", file=sys.stderr)
+              f"{setting}, {s['dtype']}{law}; output in {out}", file=sys.stderr)
     failure = None
     saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # every step on disk as it finishes
     try:

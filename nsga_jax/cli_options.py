@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import cast
 
 from .results import ConfigError
-from .validation import SCHEME_NAMES
+from .validation import IMPACT_LAWS, SCHEME_NAMES
 
 CACHE_ENV = "NSGA_JAX_CACHE"
 
@@ -41,6 +41,10 @@ def command_parser() -> argparse.ArgumentParser:
     run.add_argument("--t-end", type=float, help="end time [s]")
     run.add_argument("--rho-inf", type=float, help="spectral radius at infinity, in [0, 1]")
     run.add_argument("--scheme", choices=SCHEME_NAMES, help="time integration scheme")
+    run.add_argument("--impact-law", choices=IMPACT_LAWS,
+                     help="impact law with restitution (default newton): energetic caps Newton's restitution so "
+                          "that a frictional impact cannot create energy (Kane's paradox; ds and dsn; "
+                          "docs/friction.md)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a config key (repeatable), e.g. --set e=0.5 or, for a system file, "
                           "--set bodies.ball.mass=2")

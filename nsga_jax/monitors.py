@@ -27,6 +27,9 @@ contact (the step resolves them simultaneously)."""
 ENERGY_WARNING = "energy rise at an impact"
 """The start of the warning :func:`invariant_warnings` gives for energy
 created at an impact step (what ``strict`` turns into a failure)."""
+ENERGETIC_HINT = ('the impact law impact_law = "energetic" (DS, DSn; Python: DS(impact_law="energetic"), '
+                  'a config\'s [solver] impact_law, or --impact-law energetic) cannot create energy')
+"""What the energy warning offers where friction and e > 0 can cause the rise."""
 
 
 @dataclass(frozen=True)
@@ -255,7 +258,7 @@ def invariant_warnings(totals: RunTotals, tol: Tolerances, h: float, t0: float =
                        f"acted; the step is too coarse for the motion there (tolerance "
                        f"{100 * tol.impact_energy:g} %)"
                        + ("; or: with friction, Newton's restitution (e > 0) can create energy at an impact "
-                          "that reverses a slip (Kane's paradox), see docs/friction.md"
+                          f"that reverses a slip (Kane's paradox): {ENERGETIC_HINT}, see docs/friction.md"
                           if friction_with_restitution else ""))
     return out
 
@@ -271,5 +274,6 @@ def coarse_step_warning(rate: float | None, h: float, tol: Tolerances) -> str | 
             f"met at the wrong point: reduce h below {tol.rotation_per_step / rate:.2g} s")
 
 
-__all__ = ["CHAIN_WARNING", "ENERGY_WARNING", "RunTotals", "Tolerances", "coarse_step_warning", "default_tolerances",
+__all__ = ["CHAIN_WARNING", "ENERGETIC_HINT", "ENERGY_WARNING", "RunTotals", "Tolerances", "coarse_step_warning",
+           "default_tolerances",
            "invariant_warnings"]

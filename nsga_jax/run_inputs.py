@@ -16,13 +16,14 @@ import numpy as np
 from .integrators.base import AbstractScheme
 from .models.base import Model
 from .results import ConfigError
-from .validation import check_model_fields, describe, integer, real, require_instance
+from .validation import IMPACT_LAWS, check_model_fields, choice, describe, integer, real, require_instance
 
 
 def check_scheme(scheme) -> None:
     """A scheme instance with tolerances in (0, inf), an integer iteration cap
     >= 1, integer sizes >= 0 for DS's fast paths (``krylov_min_dof`` may be
-    ``None``) and its own settings in their ranges (concrete values only:
+    ``None``), DS's ``impact_law`` one of :data:`~nsga_jax.validation.IMPACT_LAWS`
+    and its own settings in their ranges (concrete values only:
     traced settings are checked where they were made)."""
     require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
     integer("max_iter", scheme.max_iter, 1)
@@ -30,6 +31,8 @@ def check_scheme(scheme) -> None:
         integer("reuse_min_dof", scheme.reuse_min_dof, 0)
     if getattr(scheme, "krylov_min_dof", None) is not None:
         integer("krylov_min_dof", scheme.krylov_min_dof, 0)
+    if hasattr(scheme, "impact_law"):
+        choice("impact_law", scheme.impact_law, IMPACT_LAWS)
     settings = {"tol_r": (scheme.tol_r, 0.0, math.inf), "tol_f": (scheme.tol_f, 0.0, math.inf), **scheme.bounds()}
     for name, (value, lo, hi) in settings.items():
         if isinstance(value, jax.core.Tracer):

@@ -57,6 +57,13 @@ SCHEME_NAMES = ("ds", "dsn", "cs", "mj")
 """The schemes' names in configs, on the command line and in ``nsga_jax.SCHEMES``
 (:func:`nsga_jax.integrators.scheme_class` gives each class)."""
 
+IMPACT_LAWS = ("newton", "energetic")
+"""The values of DS's and DSn's ``impact_law`` (the solver key ``impact_law``,
+``--impact-law``): Newton's restitution, or the energetic law that cannot
+create energy with friction (:mod:`nsga_jax.integrators.impact_law`)."""
+ENERGETIC_SCHEMES = ("ds", "dsn")
+"""The schemes that carry the energetic impact law; CS and MJ impose Newton's."""
+
 class Range(NamedTuple):
     """A field's allowed interval; ``lo_open``/``hi_open`` exclude the bound.
     The declarative form of :func:`real`'s bounds, for model fields
@@ -156,9 +163,9 @@ def time_grid(t0: Any, t1: Any, h: Any, dtype: str = "float64", *, t1_name: str 
     return t0, t1, h, n_steps
 
 
-__all__ = ["MAX_STEPS", "POSITIVE", "SCHEME_NAMES", "UNIT_INTERVAL", "Range", "check_model_fields",
-           "choice", "describe", "integer", "interval_text", "real", "refuse_traced", "require_instance", "step_count",
-           "time_grid"]
+__all__ = ["ENERGETIC_SCHEMES", "IMPACT_LAWS", "MAX_STEPS", "POSITIVE", "SCHEME_NAMES", "UNIT_INTERVAL", "Range",
+           "check_model_fields", "choice", "describe", "integer", "interval_text", "real", "refuse_traced",
+           "require_instance", "step_count", "time_grid"]
 
 
 # ----------------------------------------------------------- models, schemes

@@ -131,6 +131,8 @@ LONG = {
     "test_double_pendulum.py::test_energy_never_grows_at_the_impact",
     "test_readme.py::test_example_runs_as_written[docs/newtons-cradle.md: In Python]",
     "test_readme.py::test_example_runs_as_written[docs/double-pendulum.md: In Python]",
+    "test_energetic_impact.py::test_the_share_is_differentiable",
+    "test_energetic_impact.py::test_dsn_carries_the_law_and_gravity_leaves_the_steps_own_error",
 }
 
 

@@ -37,6 +37,7 @@ from .base import (
 )
 from .coefficients import GenAlphaCoefficients
 from .friction import projection_start
+from .impact_law import velocity_jump
 from .krylov import KRYLOV_MIN_DOF, KrylovOperator, kronecker_mass, linear_tolerance, mass_preconditioner
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
@@ -56,7 +57,6 @@ from .subproblems import (
     smooth_motion,
     smooth_problem,
     smooth_start,
-    velocity_problem,
 )
 
 
@@ -116,11 +116,16 @@ class DS(AbstractGenAlpha):
             element blocks solved by preconditioned conjugate gradients to a
             tenth of eq. 51's tolerance (:mod:`~nsga_jax.integrators.krylov`).
             ``None``: never. Static.
+        impact_law: ``"newton"`` (the default: Newton's restitution) or
+            ``"energetic"``: with friction and e > 0, Newton's jump capped so
+            that an impact cannot create energy (Kane's paradox;
+            :mod:`~nsga_jax.integrators.impact_law`). Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
     reuse_min_dof: int = eqx.field(static=True, default=100, kw_only=True)
     krylov_min_dof: int | None = eqx.field(static=True, default=KRYLOV_MIN_DOF, kw_only=True)
+    impact_law: str = eqx.field(static=True, default="newton", kw_only=True)
 
     name = "ds"
     subproblems = ("smooth", "position", "velocity")
@@ -210,11 +215,10 @@ class DS(AbstractGenAlpha):
         position: PositionAux = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
-        sol_v = solve(velocity_problem, (model, ops, tol, t, h, smooth, U, position.active, f_smooth,
-                                         G_prev_v_prev, self.nonsmooth_forces),
-                      projection_start(model, qt), self.max_iter, held[2], name="velocity_jump")
-        W, _ = sol_v.x
-        velocity: VelocityAux = sol_v.aux
+        velocity: VelocityAux
+        sol_v, W, velocity = velocity_jump(self.impact_law, (model, ops, tol, t, h, smooth, U, position.active,
+                                                             f_smooth, G_prev_v_prev, self.nonsmooth_forces),
+                                           projection_start(model, qt), self.max_iter, held[2], tol[0])
 
         q, v = qt + U, vt + W
         results = [sol_s, sol_p, sol_v]

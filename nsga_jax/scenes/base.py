@@ -77,13 +77,17 @@ class Scene:
 
 
 def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
-    """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter)."""
+    """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter, impact_law)."""
     from ..integrators import scheme_class
 
     common = dict(tol_r=solver["tol_r"], tol_f=solver["tol_f"], max_iter=solver["max_iter"])
     name = solver["scheme"]
     cls: Any = scheme_class(name)  # its own setting: MJ's theta, the generalized-α schemes' rho_inf
-    return cls(theta=solver["theta"], **common) if name == "mj" else cls(rho_inf=solver["rho_inf"], **common)
+    if name == "mj":
+        return cls(theta=solver["theta"], **common)
+    if solver.get("impact_law", "newton") != "newton":  # DS, DSn (check_solver refuses the others)
+        common["impact_law"] = solver["impact_law"]
+    return cls(rho_inf=solver["rho_inf"], **common)
 
 
 Make = Callable[[dict[str, Any], dict[str, Any]], tuple["Model", Any, Any, Callable]]

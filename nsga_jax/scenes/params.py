@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..results import ConfigError
-from ..validation import SCHEME_NAMES, Range, time_grid
+from ..validation import ENERGETIC_SCHEMES, IMPACT_LAWS, SCHEME_NAMES, Range, time_grid
 
 
 @dataclass(frozen=True)
@@ -107,6 +107,9 @@ SOLVER_PARAMS: dict[str, Param] = {
     "tol_f": positive(1e-5, "reference Newton tolerance of eq. 51"),
     "max_iter": Param(50, "Newton iteration cap per sub-problem", kind="int", lo=1, hi=10_000),
     "dtype": Param("float64", "floating-point precision of the run", kind="choice", choices=("float64", "float32")),
+    "impact_law": Param("newton", "impact law with restitution: Newton's (newton) or, with friction, one that "
+                        "cannot create energy (energetic; ds and dsn only; see docs/friction.md)", kind="choice",
+                        choices=IMPACT_LAWS),
     "record_every": Param(1, "keep every k-th step in memory and in trajectory.npz (statistics cover every "
                           "step; the CLI writes every step to DIR/steps/ when k > 1)", kind="int", lo=1,
                           hi=1_000_000_000),
@@ -115,8 +118,13 @@ SOLVER_PARAMS: dict[str, Param] = {
 
 def check_solver(solver: dict[str, Any]) -> None:
     """Cross-field rules of validated solver settings: h in (0, t_end], a step
-    that advances time in the run's precision, a step count that fits."""
+    that advances time in the run's precision, a step count that fits, an
+    energetic impact law only with a scheme that carries it."""
     time_grid(0.0, solver["t_end"], solver["h"], solver["dtype"], t1_name="t_end")
+    law = solver.get("impact_law", "newton")
+    if law != "newton" and solver["scheme"] not in ENERGETIC_SCHEMES:
+        raise ConfigError(f"impact_law = {law!r} is carried by the schemes {', '.join(ENERGETIC_SCHEMES)}; "
+                          f"scheme = {solver['scheme']!r} imposes Newton's law (impact_law = 'newton')")
 
 
 def check_all(section: str, specs: dict[str, Param], values: dict[str, Any]) -> dict[str, Any]:
