@@ -286,7 +286,8 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
     chunks, numbers = [], []
     totals = RunTotals(n_bilateral=model.n_bilateral)
     if model.n_unilateral:
-        totals.start_gaps(*jax.jvp(model.unilateral, (jnp.asarray(q0),), (jnp.asarray(v0),)), h)
+        gap0, gap_rate0 = jax.jvp(model.unilateral, (jnp.asarray(q0),), (jnp.asarray(v0),))
+        totals.start_gaps(gap0, gap_rate0, h)
     if energy_of is not None:  # E(q0, v0), from the chunk's program (no other compilation)
         rows = (jnp.broadcast_to(jnp.asarray(q0), (length, model.n_dof)),
                 jnp.broadcast_to(jnp.asarray(v0), (length, model.n_dof)))

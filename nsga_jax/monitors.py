@@ -275,5 +275,4 @@ def coarse_step_warning(rate: float | None, h: float, tol: Tolerances) -> str | 
 
 
 __all__ = ["CHAIN_WARNING", "ENERGETIC_HINT", "ENERGY_WARNING", "RunTotals", "Tolerances", "coarse_step_warning",
-           "default_tolerances",
-           "invariant_warnings"]
+           "default_tolerances", "invariant_warnings"]
