@@ -82,10 +82,21 @@ def stack_models(models: Sequence[Model]) -> Model:
 
 
 def same_structure(a: Model, b: Model) -> bool:
-    """Whether two models can share one compilation: the same tree and the
-    same static fields (their arrays may differ in value)."""
-    sa, sb = eqx.partition(a, eqx.is_array)[1], eqx.partition(b, eqx.is_array)[1]
+    """Whether two models can share one compilation: the same tree, arrays of
+    the same shapes and dtypes in the same places, and the same static fields
+    (their arrays may differ in value). The whole tree is compared, not only
+    its static part: a contact without friction has ``mu=None`` where one
+    with friction has an array, and both leave ``None`` in the static part."""
     # jaxlib declares no type for its compiled PyTreeDef, so mypy cannot see that it compares
+    if jax.tree_util.tree_structure(a) != jax.tree_util.tree_structure(b):  # type: ignore[operator]
+        return False
+    da, sa = eqx.partition(a, eqx.is_array)
+    db, sb = eqx.partition(b, eqx.is_array)
+    if jax.tree_util.tree_structure(da) != jax.tree_util.tree_structure(db):  # type: ignore[operator]
+        return False
+    if any((x.shape, x.dtype) != (y.shape, y.dtype)
+           for x, y in zip(jax.tree_util.tree_leaves(da), jax.tree_util.tree_leaves(db))):
+        return False
     return bool(jax.tree_util.tree_structure(sa) == jax.tree_util.tree_structure(sb)  # type: ignore[operator]
                 and eqx.tree_equal(sa, sb))
 
