@@ -22,12 +22,22 @@ step, exact to first order in h, while its value stays the scheme's:
 2. at that instant Newton's impact law acts on the contacts of the step's
    velocity problem and the bilateral constraints hold at velocity level:
    ``M (v⁺ - v⁻) = G_Cᵀ Λ`` with ``G_j v⁺ = -e_j G_j v⁻`` (a Delassus solve);
+   where the model has friction (``model.n_friction > 0``, static), Coulomb's
+   law also acts on the tangential impulses of the frictional contacts in the
+   impact, stick (γ_T⁺ = 0 inside |P_T| <= μ P_N) or slip (P_T = -μ P_N
+   γ_T⁺/|γ_T⁺|), solved by semi-smooth Newton and differentiated by the
+   implicit function theorem with the stick/slip set frozen
+   (:func:`~nsga_jax.impact_time_friction.frictional_impact`);
 3. the motion goes on for h - τ with the acceleration a_n, projected so that
    the contacts that stay closed (e = 0, or already closed) and the bilateral
-   constraints hold at acceleration level.
+   constraints hold at acceleration level; with friction, convective terms
+   included, a closed contact that still slips carries the sliding force
+   -μ N γ_T⁺/|γ_T⁺| and one that sticks is held sticking
+   (:func:`~nsga_jax.impact_time_friction.continuation`).
 
 Simultaneous contacts share the earliest instant. Steps without a closing
-contact keep the scheme's derivative exactly.
+contact keep the scheme's derivative exactly. A frictionless model traces
+the frictionless rebuild only.
 """
 
 from __future__ import annotations
@@ -38,7 +48,9 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._custom_types import Scalar, Vector
+from .impact_time_friction import continuation, frictional_impact
 from .integrators.base import StepState
+from .integrators.friction import has_friction
 from .integrators.linalg import dense_solve, masked_solve
 from .integrators.model_terms import consistent_acceleration, is_unilateral, restitution
 from .integrators.operators import Operators
@@ -123,10 +135,14 @@ def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput
     joints = ~is_unilateral(model)
     rate_minus = G @ v_minus
     in_impact = out.active_velocity | joints
-    v_plus = _constrained(M, G, in_impact, v_minus, -e * rate_minus)
     # contacts that stay closed after the impact (no rebound), and the joints
     stays = in_impact & (e * jnp.abs(rate_minus) <= 1e-12 * (1.0 + jnp.abs(rate_minus)))
-    a_plus = _constrained(M, G, stays | joints, a, jnp.zeros_like(e))
+    if has_friction(model):  # static: a frictionless model traces the Delassus solves below
+        v_plus = frictional_impact(model, M, G, q_hit, v_minus, in_impact, e)
+        a_plus = continuation(model, M, G, q_hit, v_minus, v_plus, a, stays | joints)
+    else:
+        v_plus = _constrained(M, G, in_impact, v_minus, -e * rate_minus)
+        a_plus = _constrained(M, G, stays | joints, a, jnp.zeros_like(e))
     rest = h - tau
     return q_hit + rest * v_plus + 0.5 * rest**2 * a_plus, v_plus + rest * a_plus
 

@@ -17,7 +17,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     # (layer, top-level modules or subpackages of nsga_jax), from the bottom up
     ("foundation", {"_custom_types", "_util", "results", "validation", "precision", "compilation_cache"}),
     ("physics", {"elements", "assembly", "blocks", "models", "system", "exact", "exact_pendulums"}),
-    ("numerics", {"integrators", "adjoint", "impact_time"}),
+    ("numerics", {"integrators", "adjoint", "impact_time", "impact_time_friction"}),
     ("runs", {"saveat", "_integrate", "_simulate", "solution", "monitors", "diagnosis", "batch", "distributed",
               "run_inputs", "chunks", "memory"}),
     ("application", {"scenes", "cli", "cli_options", "bench", "sweep", "grid", "identify", "data", "studies",
