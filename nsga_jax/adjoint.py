@@ -108,6 +108,11 @@ class ImpactTimeAdjoint(AbstractAdjoint):
     def step(self, scheme: AbstractScheme, model: Model, ops: Operators, state: StepState, extra: jax.Array,
              h: Scalar) -> tuple[StepState, StepOutput, jax.Array]:
         refuse_without_implicit_adjoint(scheme)
+        law = getattr(scheme, "impact_law", "newton")
+        if model.n_friction and law != "newton":
+            raise ConfigError(f"ImpactTimeAdjoint rebuilds an impact with Newton's law, not the impact_law = "
+                              f"{law!r} of {type(scheme).__name__} (with friction they differ); use "
+                              "DiscreteAdjoint(), the derivative of the energetic law as it runs")
         new, out = scheme.step(model, ops, state, h)
         if model.n_unilateral == 0:
             return new, out, extra

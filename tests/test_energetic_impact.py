@@ -240,3 +240,20 @@ def test_the_warning_leaves_the_option_out_where_it_cannot_help():
     (with_friction,) = invariant_warnings(totals, tol, 1e-3, friction_with_restitution=True)
     (without,) = invariant_warnings(totals, tol, 1e-3, friction_with_restitution=False)
     assert ENERGETIC_HINT in with_friction and "impact_law" not in without
+
+
+def test_the_impact_time_adjoint_refuses_the_energetic_law_with_friction():
+    """The impact-time rebuild applies Newton's law: with friction it would be the
+    derivative of another law than the run's, so it is refused by name while
+    tracing; with Newton's law it traces."""
+    nj = nsga_jax
+    scene = load_scene("incline", {"mu": 0.2, "t_end": 0.01})
+
+    def run(scheme):
+        return nj.integrate(scene.model, scheme, 0.0, 0.01, 1e-3, scene.q0, scene.v0,
+                            adjoint=nj.ImpactTimeAdjoint()).q[-1, 0]
+
+    with pytest.raises(nj.ConfigError, match=r"ImpactTimeAdjoint rebuilds an impact with Newton's law, not the "
+                                             r"impact_law = 'energetic' of DS .* use DiscreteAdjoint\(\)"):
+        jax.eval_shape(lambda: run(nj.DS(impact_law="energetic")))
+    jax.eval_shape(lambda: run(nj.DS()))  # Newton's law: traced without complaint
