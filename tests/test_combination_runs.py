@@ -354,15 +354,9 @@ def test_sweep_rows_of_a_system_file_equal_single_runs():
 # ==================================================================== float32
 
 
-FLOAT32_FRICTION = pytest.mark.xfail(
-    strict=True, raises=nj.ConvergenceError,
-    reason="bug: incline (friction) in float32 fails at step 1 with a non-finite value in the velocity jump "
-           "sub-problem (float64 runs)")
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("name, overrides", [
-    pytest.param("incline", INCLINE, marks=FLOAT32_FRICTION),
+    ("incline", INCLINE),
     ("bouncing_ball", {"t_end": 1.0, "scheme": "dsn"}),
     ("bouncing_ball", {"t_end": 1.0, "scheme": "cs"}),
     ("bouncing_ball", {"t_end": 1.0, "scheme": "mj"}),

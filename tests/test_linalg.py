@@ -165,3 +165,27 @@ def test_bounded_lapack_batches_chunk_a_vmapped_batch_with_the_same_results(n, c
     for x, y in zip(bounded, jax.jit(jax.vmap(solves))(*args)):
         np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-14)
     np.testing.assert_allclose(bounded[0], np.linalg.solve(A, rhs[..., None])[..., 0], rtol=1e-12)
+
+
+def test_redundancy_shift_survives_float32_and_leaves_float64_unchanged(monkeypatch):
+    """The Delassus shift never falls below the precision's round-off: 1e-12
+    relative is lost in float32 (d + 1e-12 d == d), and a block with
+    redundant rows (two contacts sharing a row, as a box's corners on an
+    incline share their tangent) was exactly singular there, NaN in the
+    compiled solve. float64 keeps the constant 1e-12 itself."""
+    from nsga_jax.integrators import linalg
+    from nsga_jax.integrators.linalg import REDUNDANCY_SHIFT, masked_solve, redundancy_shift
+
+    assert redundancy_shift(jnp.float64) == REDUNDANCY_SHIFT
+    shift32 = redundancy_shift(jnp.float32)
+    assert np.float32(1.0) + np.float32(shift32) > np.float32(1.0) and shift32 < 1e-4
+    G = np.array([[1.0, 2.0, 0.0], [1.0, 2.0, 0.0], [0.0, 1.0, 1.0]])  # rows 0 and 1 redundant
+    D = jnp.asarray(G @ G.T, jnp.float32)
+    rhs = jnp.asarray([5.0, 5.0, 2.0], jnp.float32)  # consistent: the rows agree
+    active = jnp.ones(3, bool)
+    x = jax.jit(masked_solve)(D, rhs, active)
+    assert np.all(np.isfinite(x))
+    np.testing.assert_allclose(D @ x, rhs, rtol=1e-3)
+    monkeypatch.setattr(linalg, "REDUNDANCY_SHIFT_EPS", 0.0)  # the float64 constant alone: lost in float32
+    # (a new function object: jit would reuse the trace above)
+    assert not np.all(np.isfinite(jax.jit(lambda *a: masked_solve(*a))(D, rhs, active)))

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
-from .linalg import REDUNDANCY_SHIFT, AbstractFactorisation, linear_solve
+from .linalg import AbstractFactorisation, linear_solve, redundancy_shift
 from .newton import Residual, convergence_bound
 
 
@@ -183,7 +183,7 @@ class FrictionLaw(NamedTuple):
         m = D.shape[0]
         (P_lam, P_rate), (R_lam, R_rate) = jax.jacfwd(lambda a, b: self(a, b)[:2], argnums=(0, 1))(lam, rate)
         eye = jnp.eye(m, dtype=D.dtype)
-        D = D + REDUNDANCY_SHIFT * jnp.max(jnp.abs(jnp.diagonal(D))) * eye  # redundant contacts: see linalg
+        D = D + redundancy_shift(D.dtype) * jnp.max(jnp.abs(jnp.diagonal(D))) * eye  # redundant contacts: see linalg
         Gy = G_low @ y
         system = jnp.block([[eye - P_rate @ D, -P_lam], [R_rate @ D, R_lam]])
         rhs = jnp.concatenate([-P_rate @ Gy, -r_c + R_rate @ Gy])

@@ -307,7 +307,27 @@ REDUNDANCY_SHIFT = 1e-12
 (four coplanar contacts on a rigid body) make it singular, and the shift
 keeps the solve finite; it changes a regular solve by about 1e-12 relative,
 which the Newton iteration corrects. (Multipliers of redundant constraints
-stay non-unique: which ones carry the impulse depends on the active set.)"""
+stay non-unique: which ones carry the impulse depends on the active set.)
+The shift in use is :func:`redundancy_shift`, never below the precision's
+round-off."""
+
+REDUNDANCY_SHIFT_EPS = 64.0
+"""The least relative shift in units of the precision's eps. 1e-12 is below
+float32's eps (1.2e-7): there ``d + 1e-12 d`` rounds back to ``d``, the shift
+is lost, and redundant rows (two corners of a box on an incline share their
+tangent row) leave the block exactly singular, a zero pivot and NaN in the
+compiled LU (eager LU happened to leave a round-off pivot). 64 eps (7.6e-6
+in float32, the residual floors' factor) keeps the shifted pivot well above
+the elimination's round-off while perturbing a regular solve no more than
+float32's convergence floor; in float64 it is 1.4e-14 < 1e-12, so float64's
+shift is unchanged."""
+
+
+def redundancy_shift(dtype) -> float:
+    """The relative diagonal shift of a Delassus block in precision ``dtype``:
+    ``max(REDUNDANCY_SHIFT, REDUNDANCY_SHIFT_EPS * eps)`` (a Python number, so
+    that float64's arithmetic is exactly that of the constant 1e-12)."""
+    return max(REDUNDANCY_SHIFT, REDUNDANCY_SHIFT_EPS * float(jnp.finfo(dtype).eps))
 
 
 def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
@@ -316,7 +336,7 @@ def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
         return jnp.where(active, rhs / jnp.where(active, D[0], 1.0), 0.0)
     both = active[:, None] & active[None, :]
     eye = jnp.eye(D.shape[0], dtype=D.dtype)
-    shift = REDUNDANCY_SHIFT * jnp.max(jnp.abs(jnp.diagonal(D)))
+    shift = redundancy_shift(D.dtype) * jnp.max(jnp.abs(jnp.diagonal(D)))
     Dm = jnp.where(both, D + shift * eye, eye)
     return jnp.where(active, linear_solve(Dm, jnp.where(active, rhs, 0.0)), 0.0)
 
