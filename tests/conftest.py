@@ -115,6 +115,7 @@ LONG = {
     "test_sweep.py::test_rigid_box_sweep_equals_single_runs",
     "test_event_gradients.py::test_other_schemes_event_gradient[MJ]",
     "test_impact_time_friction.py::test_disk_slipping_through_the_impact",
+    "test_impact_time_friction.py::test_disk_slipping_through_the_impact_with_the_other_schemes",
     "test_impact_time_friction.py::test_disk_sticking_at_the_impact",
     "test_impact_time_friction.py::test_disk_landing_and_sliding_on",
     "test_impact_time_friction.py::test_discrete_adjoint_misses_the_impact_instant",
