@@ -209,10 +209,11 @@ def landing_loss(scheme, adjoint, steps=8):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("adjoint", [nsga_jax.DiscreteAdjoint(), nsga_jax.ImpactTimeAdjoint()],
-                         ids=["discrete", "impact_time"])
-def test_gradients_through_the_landing_match_the_dense_path(adjoint):
-    ds = nsga_jax.DS(tol_r=1e-10, tol_f=1e-10)
+@pytest.mark.parametrize("scheme_class, adjoint", [
+    (nsga_jax.DS, nsga_jax.DiscreteAdjoint()), (nsga_jax.DS, nsga_jax.ImpactTimeAdjoint()),
+    (nsga_jax.DSn, nsga_jax.ImpactTimeAdjoint())], ids=["discrete", "impact_time", "dsn-impact_time"])
+def test_gradients_through_the_landing_match_the_dense_path(scheme_class, adjoint):
+    ds = scheme_class(tol_r=1e-10, tol_f=1e-10)
     grads = {}
     for name, scheme in (("krylov", dataclasses.replace(ds, krylov_min_dof=0)), ("dense", ds)):
         params, loss = landing_loss(scheme, adjoint)
