@@ -471,3 +471,18 @@ def test_a_sweep_over_mu_from_zero_runs_frictionless_and_frictional_members_apar
         assert row["result"] == "successful"
         assert row["s_final"] == pytest.approx(sol.observables["s"][-1], rel=1e-9, abs=1e-12)
     assert res.rows[0]["s_final"] > res.rows[1]["s_final"] > 0.0  # friction slows the block
+
+
+@pytest.mark.slow
+def test_identify_on_the_matrix_free_path():
+    """The cube at its default 5 divisions (648 coordinates) takes DS's
+    matrix-free path; E is recovered from the top corner's height through the
+    landing (the window of test_krylov, 20 steps)."""
+    settings = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43}
+    scene = load_scene("flexible_cube", settings)
+    assert scene.model.n_dof >= scene.scheme().krylov_min_dof  # the default switch: the matrix-free path
+    true = {"E": float(scene.parameters["E"])}
+    data = synthetic_data("flexible_cube", settings, ["x8_uz"])
+    result = identify("flexible_cube", ["E"], data, overrides=settings, initial={"E": 1.1 * true["E"]}, true=true)
+    assert abs(result.recovered["E"] / true["E"] - 1) < 1e-2, (result.recovered, result.stop)
+    assert result.converged and result.losses[-1] < 1e-3 * result.losses[0]
