@@ -23,6 +23,18 @@ def _compilation_cache(tmp_path_factory):
 
 
 @pytest.fixture
+def scene_registry():
+    """The scenes a test registers (system files, scene files) stay out of the
+    other tests' registry: it is restored after the test."""
+    from nsga_jax.scenes import REGISTRY
+
+    before = dict(REGISTRY)
+    yield REGISTRY
+    REGISTRY.clear()
+    REGISTRY.update(before)
+
+
+@pytest.fixture
 def no_compilation(monkeypatch):
     """Any attempt to lower or compile a run's programs fails the test: for
     tests that input is refused before anything is compiled."""

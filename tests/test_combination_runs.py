@@ -31,7 +31,7 @@ from nsga_jax.cli import main
 from nsga_jax.exact_pendulums import double_pendulum
 from nsga_jax.identify import Data, identify, synthetic_data
 from nsga_jax.metrics import observed_order, relative_l1_error
-from nsga_jax.scenes import REGISTRY, load_scene, parametrize
+from nsga_jax.scenes import load_scene, parametrize
 from nsga_jax.sweep import sweep
 
 SYSTEMS = Path(__file__).resolve().parents[1] / "configs" / "systems"
@@ -40,13 +40,7 @@ BLOCK_FILE = str(SYSTEMS / "sliding_block.toml")
 INCLINE = {"t_end": 0.3}  # mu = 0.2 < tan 0.3: the block slides (exact solution known) from the first step
 
 
-@pytest.fixture(autouse=True)
-def _registry():
-    """System files register scenes; they stay out of the other tests' registry."""
-    before = dict(REGISTRY)
-    yield
-    REGISTRY.clear()
-    REGISTRY.update(before)
+pytestmark = pytest.mark.usefixtures("scene_registry")  # system files register scenes (conftest)
 
 
 def quiet_run(scene, **kwargs):

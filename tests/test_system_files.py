@@ -24,13 +24,7 @@ PENDULUM = SYSTEMS / "double_pendulum_wall.toml"
 CHAIN = SYSTEMS / "spring_chain.toml"
 
 
-@pytest.fixture(autouse=True)
-def _registry():
-    """The scenes these tests register stay out of the other tests' registry."""
-    before = dict(REGISTRY)
-    yield
-    REGISTRY.clear()
-    REGISTRY.update(before)
+pytestmark = pytest.mark.usefixtures("scene_registry")  # system files register scenes (conftest)
 
 
 def _variant(tmp_path: Path, source: Path, old: str, new: str, name: str | None = None) -> Path:
