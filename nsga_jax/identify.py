@@ -26,6 +26,18 @@ import optax
 from ._integrate import integrate
 from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint
 from .data import Data
+from .fit_steps import (
+    MAX_STEP,
+    at_bounds,
+    bounded_step,
+    compass_search,
+    flat_bound,
+    free_step,
+    line_search,
+    projected_gradient,
+    scaled_bounds,
+    to_values,
+)
 from .results import ConfigError
 from .scenes.base import load_scene, make_scheme, parametrize
 from .validation import integer, require_instance
@@ -104,15 +116,6 @@ NOISE_MARGIN = 1.5
 """A fit whose loss is below this multiple of the data's noise floor fits the
 data to its noise (the mean square of n noisy samples scatters by sqrt(2/n)
 about σ², and the estimate of σ by a few per cent)."""
-
-COMPASS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
-"""The changes of one scaled parameter (its starting value is 1), largest
-first, that a fit tries where a line search failed (a compass search): the
-loss is piecewise smooth through impacts, and a jump on the gradient's path
-can end a line search away from a minimum. The first change that lowers the
-loss is taken; where none of the smallest does, the fit stands at a local
-minimum of the simulated loss at that resolution."""
-
 
 def _run(build, scheme, h, n_steps, p, adjoint):
     model, q0, v0, observables = build(p)
@@ -196,7 +199,7 @@ def identify(
     specs = scene.spec.parameters
     # Scaled variables u = p / scale, of order one.
     scale = {k: float(params0[k]) if float(params0[k]) != 0.0 else 1.0 for k in names}
-    bounds = {k: _scaled_bounds(specs[k], scale[k]) for k in names}
+    bounds = {k: scaled_bounds(specs[k], scale[k]) for k in names}
     scheme = make_scheme(scene.solver)
     t_data = jnp.asarray(data.t)
     ts = jnp.arange(n_steps + 1) * h
@@ -232,29 +235,29 @@ def identify(
     it = 0
     while it < max_steps:
         if not math.isfinite(losses[-1]):
-            raise ConfigError(f"the loss is not finite at {_to_values(u, scale)}; start closer to the data")
-        active = _at_bounds(u, bounds)
-        if float(optax.tree.norm(_projected(grad, active))) < gtol:
-            stop = "bound" if _flat_bound(active, grad, losses, gtol) else "gradient"
+            raise ConfigError(f"the loss is not finite at {to_values(u, scale)}; start closer to the data")
+        active = at_bounds(u, bounds)
+        if float(optax.tree.norm(projected_gradient(grad, active))) < gtol:
+            stop = "bound" if flat_bound(active, grad, losses, gtol) else "gradient"
             break
         it += 1
         step, state = direction(grad, state, u)
-        step = _bounded_step(_free(step, active), MAX_STEP)
+        step = bounded_step(free_step(step, active), MAX_STEP)
         if optimizer == "adam":
             u = advance(u, step, 1.0)
             (value, pred), grad = evaluate(u)
             evaluations += 1
         else:
-            accepted, n = _line_search(evaluate, advance, u, losses[-1], _projected(grad, active), step)
+            accepted, n = line_search(evaluate, advance, u, losses[-1], projected_gradient(grad, active), step)
             if accepted is None:  # restart L-BFGS from the (normalised) gradient direction
                 state = jax.tree.map(jnp.asarray, opt.init(u))
                 step, state = direction(grad, state, u)
-                step = _bounded_step(_free(step, active), MAX_STEP)
-                accepted, m = _line_search(evaluate, advance, u, losses[-1], _projected(grad, active), step)
+                step = bounded_step(free_step(step, active), MAX_STEP)
+                accepted, m = line_search(evaluate, advance, u, losses[-1], projected_gradient(grad, active), step)
                 n += m
             evaluations += n
             if accepted is None:
-                accepted, m, flat = _compass(evaluate, advance, u, losses[-1], names)
+                accepted, m, flat = compass_search(evaluate, advance, u, losses[-1], names)
                 evaluations += m
                 if accepted is None:
                     stop = "flat" if flat else "minimum"
@@ -265,143 +268,25 @@ def identify(
         losses.append(float(value))
         stalled = optimizer == "lbfgs" and losses[-2] - losses[-1] <= ftol * abs(losses[-2])
         if progress:
-            values = ", ".join(f"{k} = {v:.6g}" for k, v in _to_values(u, scale).items())
+            values = ", ".join(f"{k} = {v:.6g}" for k, v in to_values(u, scale).items())
             print(f"  iteration {it}: loss {losses[-1]:.6e}, {values} ({evaluations} evaluations)",
                   file=sys.stderr, flush=True)
         if stalled:
-            active = _at_bounds(u, bounds)
-            stop = "bound" if _flat_bound(active, grad, losses, gtol) else "loss"
+            active = at_bounds(u, bounds)
+            stop = "bound" if flat_bound(active, grad, losses, gtol) else "loss"
             break
     if stop in ("flat", "max_steps") and losses[-1] <= NOISE_MARGIN * noise_floor:
         stop = "noise"
     wall = time.perf_counter() - t0
     return Identification(
-        names=list(names), initial=_to_values(u0, scale), recovered=_to_values(u, scale),
+        names=list(names), initial=to_values(u0, scale), recovered=to_values(u, scale),
         true=None if true is None else {k: float(true[k]) for k in names}, losses=losses, iterations=it,
         evaluations=evaluations, stop=stop, wall_time_s=wall, compile_time_s=compile_time,
         fitted={k: np.asarray(v) for k, v in pred.items()},
         initial_fit={k: np.asarray(v) for k, v in initial_fit.items()},
-        gradient_norm=float(optax.tree.norm(grad)), at_bounds=sorted(_at_bounds(u, bounds)),
+        gradient_norm=float(optax.tree.norm(grad)), at_bounds=sorted(at_bounds(u, bounds)),
         noise_floor=noise_floor, compass_steps=compass_steps,
     )
-
-
-MAX_STEP = 0.5
-"""The largest change of a scaled parameter (its starting value is 1) that
-one iteration tries: a longer step is shortened to it. Through impacts the
-loss is piecewise smooth, and a full quasi-Newton step can land far away in
-a flat region (e = 0: no rebound, no gradient)."""
-
-
-FIT_LOSS = 1e-6
-"""A fit whose loss fell below this fraction of its starting value fits the
-data, even where it stops on a bound with a zero gradient."""
-
-
-def _flat_bound(active, grad, losses, gtol) -> bool:
-    """Stopped on a bound where the whole gradient vanishes without fitting
-    the data: a flat region of the loss (e = 0 for a bouncing ball), no fit."""
-    return bool(active) and float(optax.tree.norm(grad)) < gtol and losses[-1] > FIT_LOSS * losses[0]
-
-
-def _at_bounds(u, bounds) -> dict[str, str]:
-    """The parameters on a bound of their range: ``{name: "lower" | "upper"}``."""
-    out = {}
-    for k, (lo, hi) in bounds.items():
-        x = float(u[k])
-        tol = 1e-12 * max(1.0, abs(x))
-        if x <= lo + tol:
-            out[k] = "lower"
-        elif x >= hi - tol:
-            out[k] = "upper"
-    return out
-
-
-def _projected(grad, active):
-    """The gradient with the components that push out of the range zeroed
-    (a bound the loss pushes into is where a bounded minimum lies)."""
-    def keep(k, g):
-        side = active.get(k)
-        return jnp.where((side == "lower" and g > 0) or (side == "upper" and g < 0), 0.0, g) if side else g
-
-    return {k: keep(k, g) for k, g in grad.items()}
-
-
-def _free(step, active):
-    """The step with the components that would leave the range through an
-    active bound zeroed (the projected direction)."""
-    def keep(k, d):
-        side = active.get(k)
-        return jnp.where((side == "lower" and d < 0) or (side == "upper" and d > 0), 0.0, d) if side else d
-
-    return {k: keep(k, d) for k, d in step.items()}
-
-
-def _bounded_step(step, largest: float):
-    """``step`` shortened so that no component exceeds ``largest``."""
-    size = max(float(jnp.max(jnp.abs(d))) for d in step.values())
-    return step if size <= largest else {k: d * (largest / size) for k, d in step.items()}
-
-
-def _line_search(evaluate, advance, u, value, grad, step, trials: int = 30, c1: float = 1e-4):
-    """Backtracking from the full step: the first trial with sufficient decrease
-    (Armijo), else the trial with the lowest loss if it is below ``value``
-    (the loss is piecewise smooth through impacts: a jump can hide the
-    decrease that the gradient promises); ``None`` when no trial decreases.
-    Returns ``((u, value, prediction, gradient) or None, evaluations)``."""
-    slope = float(optax.tree.vdot(grad, step))
-    if not slope < 0.0:  # not a descent direction: steepest descent, same length
-        scale = float(optax.tree.norm(step)) / max(float(optax.tree.norm(grad)), 1e-300)
-        step = jax.tree.map(lambda g: -scale * g, grad)
-        slope = -scale * float(optax.tree.vdot(grad, grad))
-    best = None
-    for trial in range(trials):
-        alpha = 0.5**trial
-        candidate = advance(u, step, alpha)
-        (c_value, c_pred), c_grad = evaluate(candidate)
-        c_value = float(c_value)
-        if not math.isfinite(c_value):
-            continue
-        if c_value <= value + c1 * alpha * slope:
-            return (candidate, c_value, c_pred, c_grad), trial + 1
-        if c_value < value and (best is None or c_value < best[1]):
-            best = (candidate, c_value, c_pred, c_grad)
-    return best, trials
-
-
-def _compass(evaluate, advance, u, value, names):
-    """A compass search where a line search failed: each parameter moved by
-    ±δ for δ in :data:`COMPASS`, largest first (projected on its range).
-    Returns ``((u, value, prediction, gradient) of the first move that lowers
-    the loss, or None; evaluations; whether a smallest move left the loss
-    unchanged, a flat loss)``."""
-    evaluations, flat = 0, False
-    for delta in COMPASS:
-        for k in names:
-            for sign in (1.0, -1.0):
-                step = {n: jnp.asarray(sign * delta if n == k else 0.0) for n in names}
-                candidate = advance(u, step, 1.0)
-                if all(float(candidate[n]) == float(u[n]) for n in names):  # against a bound
-                    continue
-                (c_value, c_pred), c_grad = evaluate(candidate)
-                evaluations += 1
-                c_value = float(c_value)
-                if c_value < value:
-                    return (candidate, c_value, c_pred, c_grad), evaluations, False
-                flat |= delta == COMPASS[-1] and abs(c_value - value) <= 1e-14 * abs(value)
-    return None, evaluations, flat
-
-
-def _scaled_bounds(spec, scale: float) -> tuple[float, float]:
-    """A parameter's range in scaled variables; open bounds are kept 1e-6 inside."""
-    lo = spec.lo + (1e-6 * abs(scale) if spec.lo_open else 0.0)
-    hi = spec.hi - (1e-6 * abs(scale) if spec.hi_open else 0.0)
-    return tuple(sorted((lo / scale, hi / scale)))
-
-
-def _to_values(u, scale) -> dict[str, float]:
-    """Scaled variables back to parameter values."""
-    return {k: float(u[k]) * scale[k] for k in u}
 
 
 def write_identification(result: Identification, data: Data, out_dir, title: str = "", *,

@@ -20,8 +20,8 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("numerics", {"integrators", "adjoint", "impact_time", "impact_time_friction"}),
     ("runs", {"saveat", "_integrate", "_simulate", "solution", "monitors", "diagnosis", "batch", "distributed",
               "run_inputs", "chunks", "memory"}),
-    ("application", {"scenes", "cli", "cli_options", "bench", "sweep", "grid", "identify", "data", "studies",
-                     "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
+    ("application", {"scenes", "cli", "cli_options", "bench", "sweep", "grid", "identify", "fit_steps", "data",
+                     "studies", "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
     ("package", {"__init__"}),
 ]
 LEVEL = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}

@@ -11,7 +11,8 @@ import pytest
 import nsga_jax as nj
 from nsga_jax import ConfigError
 from nsga_jax.cli import main
-from nsga_jax.identify import COMPASS, NOISE_MARGIN, Data, Identification, _compass, identify, synthetic_data
+from nsga_jax.fit_steps import COMPASS, compass_search
+from nsga_jax.identify import NOISE_MARGIN, Data, Identification, identify, synthetic_data
 
 BALL = {"t_end": 1.0, "h": 2e-3}  # one impact (t ~ 0.45 s), 500 steps
 TRUE = {"e": 0.8, "height": 1.0}
@@ -201,7 +202,7 @@ def _advance(u, step, alpha):
     (lambda x: x, 0.0, "minimum"),  # against the lower bound, the loss rising inside
 ])
 def test_a_failed_line_search_searches_the_compass_until_a_minimum(loss, x, found):
-    accepted, evaluations, flat = _compass(_fake_evaluate(loss), _advance, {"x": jnp.asarray(x)}, loss(x), ["x"])
+    accepted, evaluations, flat = compass_search(_fake_evaluate(loss), _advance, {"x": jnp.asarray(x)}, loss(x), ["x"])
     if isinstance(found, str):
         assert accepted is None and flat is (found == "flat")
         assert evaluations == (len(COMPASS) if x == 0.0 else 2 * len(COMPASS))
