@@ -245,13 +245,10 @@ def _identify(args) -> int:
         print(line)
     print(f"{result.iterations} iterations, loss {result.losses[0]:.3e} -> {result.losses[-1]:.3e}, "
           f"{result.wall_time_s:.2f} s (compile {result.compile_time_s:.1f} s)")
-    if result.converged:
-        print(f"converged: {result.stop_message}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
-    if not result.converged:
-        print(f"error: the fit did not converge: {result.stop_message}", file=sys.stderr)
-        return EXIT_FAILED
-    return 0
+    verdict = "converged" if result.converged else "error: the fit did not converge"
+    print(f"{verdict}: {result.stop_message}", file=sys.stdout if result.converged else sys.stderr)
+    return 0 if result.converged else EXIT_FAILED
 
 
 def _sweep(args) -> int:
