@@ -43,11 +43,17 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
-from .linalg import AbstractFactorisation, linear_solve, redundancy_shift
+from .linalg import AbstractFactorisation, minimum_norm_split, redundancy_shift
 from .newton import Residual, convergence_bound
+
+
+SLIP_MARGIN = 1e-3
+"""How far past the edge of its disk :meth:`FrictionLaw.first_slip` moves the
+first contact to slide, relative to the step that reaches the edge."""
 
 
 def has_friction(model: Model) -> bool:
@@ -172,7 +178,7 @@ class FrictionLaw(NamedTuple):
                         (parts.active, parts.aug, parts.impulse[nc:]))
 
     def correction(self, matrix: AbstractFactorisation, r1: Vector, r_c: jax.Array, G_up: jax.Array,
-                   G_low: jax.Array, lam: jax.Array, rate: jax.Array) -> tuple[Vector, jax.Array]:
+                   G_low: jax.Array, lam: jax.Array, rate: jax.Array, bound: Scalar) -> tuple[Vector, jax.Array]:
         """The semi-smooth Newton correction (dW, dΛ) (module docstring), with
         the law's derivatives at (lam, rate) and the coordinates eliminated
         through ``matrix`` (the top-left block A)."""
@@ -183,9 +189,58 @@ class FrictionLaw(NamedTuple):
         m = D.shape[0]
         (P_lam, P_rate), (R_lam, R_rate) = jax.jacfwd(lambda a, b: self(a, b)[:2], argnums=(0, 1))(lam, rate)
         eye = jnp.eye(m, dtype=D.dtype)
-        D = D + redundancy_shift(D.dtype) * jnp.max(jnp.abs(jnp.diagonal(D))) * eye  # redundant contacts: see linalg
         Gy = G_low @ y
         system = jnp.block([[eye - P_rate @ D, -P_lam], [R_rate @ D, R_lam]])
         rhs = jnp.concatenate([-P_rate @ Gy, -r_c + R_rate @ Gy])
-        sol = linear_solve(system, rhs)
-        return -y + B @ sol[:m], sol[m:]
+        # redundant contacts make D singular: the minimum-norm step, and the null direction
+        # of the contacts given a vanishing compliance (D + shift I)
+        shift = redundancy_shift(D.dtype) * jnp.max(jnp.abs(jnp.diagonal(D)))
+        compliant = jnp.block([[eye - P_rate @ (D + shift * eye), -P_lam], [R_rate @ (D + shift * eye), R_lam]])
+        sol, null, inconsistent = minimum_norm_split(system, rhs, compliant)
+        null = jnp.where(inconsistent > bound, null, 0.0)  # consistent to the tolerance: the minimum-norm step
+        dP, dLam = sol[:m], sol[m:]
+        dW = -y + B @ dP
+        tau = lax.stop_gradient(self.first_slip(lam + dLam, rate + G_low @ dW, null[m:], G_low @ (B @ null[:m])))
+        return dW + tau * (B @ null[:m]), dLam + tau * null[m:]
+
+    def first_slip(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array) -> jax.Array:
+        """The least τ >= 0 at which a sticking contact of the law at
+        (lam + τ d_lam, rate + τ d_rate) reaches the edge of its disk,
+        |σ_T,j(τ)| = μ_j P_N,j(τ), times 1 + :data:`SLIP_MARGIN` (0 when
+        none does). Along a null direction of the Newton system of redundant
+        sticking contacts (module docstring) the coordinates do not move
+        and the law is affine in τ, so each contact's condition is a
+        quadratic in τ; where a contact may not stick (a block landing flat
+        on two corners turns, so one of them slides) the iterate is moved
+        just past the point where the first one starts to slide."""
+        nc, d = self.unilateral.shape[0], self.d
+        normals = jnp.asarray(self.normals)
+
+        def sigma_and_radius(lam_, rate_, with_constant):
+            aug = self.k * lam_[:nc] - self.p * rate_[:nc]
+            sigma = self.k * lam_[nc:].reshape(-1, d) - self.p_t[:, None] * rate_[nc:].reshape(-1, d)
+            return sigma, self.mu * aug[normals]
+
+        a, c = sigma_and_radius(lam, rate, True)
+        b, e = sigma_and_radius(d_lam, d_rate, False)
+        active = self(lam, rate).active[normals]
+        sticking = active & (c > 0) & (jnp.sum(a**2, axis=1) < c**2)
+        qa = jnp.sum(b**2, axis=1) - e**2
+        qb = 2.0 * (jnp.sum(a * b, axis=1) - c * e)
+        qc = jnp.sum(a**2, axis=1) - c**2
+        disc = jnp.maximum(qb**2 - 4.0 * qa * qc, 0.0)
+        big = -0.5 * (qb + jnp.where(qb >= 0, 1.0, -1.0) * jnp.sqrt(disc))  # roots big/qa and qc/big
+        inf = jnp.asarray(jnp.inf, a.dtype)
+
+        def positive(num, den):
+            root = num / jnp.where(den != 0, den, 1.0)
+            return jnp.where((den != 0) & (root > 0) & jnp.isfinite(root), root, inf)
+
+        roots = jnp.minimum(positive(big, qa), positive(qc, big))
+        first = jnp.min(jnp.where(sticking, roots, inf), initial=inf)
+        # an active unilateral contact whose normal impulse falls to zero opens
+        aug0 = self.k * lam[:nc] - self.p * rate[:nc]
+        daug = self.k * d_lam[:nc] - self.p * d_rate[:nc]
+        opens = self(lam, rate).active & self.unilateral & (aug0 > 0)
+        first = jnp.minimum(first, jnp.min(jnp.where(opens, positive(-aug0, daug), inf), initial=inf))
+        return jnp.where(jnp.isfinite(first), (1.0 + SLIP_MARGIN) * first, 0.0)

@@ -330,6 +330,35 @@ def redundancy_shift(dtype) -> float:
     return max(REDUNDANCY_SHIFT, REDUNDANCY_SHIFT_EPS * float(jnp.finfo(dtype).eps))
 
 
+MINIMUM_NORM_RTOL = 1e-10
+"""Singular values below this fraction of the largest count as zero in
+:func:`minimum_norm_split` (never below :data:`REDUNDANCY_SHIFT_EPS` eps)."""
+
+
+def minimum_norm_split(matrix: Matrix, rhs: jax.Array, regularised: Matrix) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The minimum-norm least-squares solution of ``matrix x = rhs``, the
+    null-space direction that a regularisation selects, and the norm of the
+    inconsistent part of ``rhs``, by SVD ``matrix = U Σ Vᵀ``:
+
+        x₀ = Σ_{σ_i > τ} v_i (u_iᵀ rhs) / σ_i,    n = V_0 V_0ᵀ (regularised⁻¹ rhs),
+        ||matrix x₀ - rhs|| = ||U_0ᵀ rhs||,
+
+    with τ = ``max(MINIMUM_NORM_RTOL, REDUNDANCY_SHIFT_EPS eps)`` σ_max and
+    V_0, U_0 the singular vectors of the singular values <= τ. For a regular
+    matrix x₀ is the solution and n ≈ 0. For a singular one x₀ has no part in
+    the null space, and n is the null-space part of the solution of the
+    ``regularised`` matrix (``matrix`` plus a small shift): its direction is
+    that of the shift's limit, its length of the order of the inconsistent
+    part divided by the shift, and the caller chooses the length to take."""
+    U, sv, Vh = jnp.linalg.svd(matrix)
+    tol = max(MINIMUM_NORM_RTOL, REDUNDANCY_SHIFT_EPS * float(jnp.finfo(matrix.dtype).eps)) * sv[0]
+    c = U.T @ rhs
+    kept = sv > tol
+    x0 = Vh.T @ jnp.where(kept, c / jnp.where(kept, sv, 1.0), 0.0)
+    null = Vh.T @ jnp.where(kept, 0.0, Vh @ linear_solve(regularised, rhs))
+    return x0, null, jnp.linalg.norm(jnp.where(kept, 0.0, c))
+
+
 def masked_solve(D: jax.Array, rhs: jax.Array, active: ActiveSet) -> jax.Array:
     """Solve ``D[a, a] x[a] = rhs[a]``; x is zero on inactive rows."""
     if D.shape[0] == 1:  # one constraint: a division (an LU call costs more here)

@@ -103,9 +103,13 @@ class Problem(NamedTuple):
 def damped_step(residual: Callable[[Any], Residual], x, dx, res: Residual) -> tuple[Any, Residual]:
     """``x + α dx`` with α = 1, 1/2, 1/4, ... (at most
     :data:`LINE_SEARCH_HALVINGS` halvings): the first that decreases the
-    residual norm by the Armijo factor 1 - 1e-4 α, or the last tried. A full
-    Newton step that decreases the norm is taken as it is, so where Newton
-    converges the iterates are Newton's."""
+    residual norm by the Armijo factor 1 - 1e-4 α. A full Newton step that
+    decreases the norm is taken as it is, so where Newton converges the
+    iterates are Newton's. When no α decreases the norm, the full step is
+    taken if it raises the norm by at most :data:`ALLOWED_GROWTH` (a step
+    that changes the law's active set on purpose: a sticking contact of a
+    redundant set moved to slide, :meth:`~nsga_jax.integrators.friction.FrictionLaw.first_slip`,
+    whose residual is flat in α until the contact slides), else the shortest."""
     norm = jnp.linalg.norm(res.r)
 
     def trial(alpha):
@@ -121,8 +125,17 @@ def damped_step(residual: Callable[[Any], Residual], x, dx, res: Residual) -> tu
         return alpha / 2, trial(alpha / 2), k + 1
 
     one = jnp.ones((), norm.dtype)
-    _, (x_new, res_new), _ = lax.while_loop(too_long, halve, (one, trial(one), jnp.zeros((), jnp.int32)))
-    return x_new, res_new
+    full = trial(one)
+    alpha, last, _ = lax.while_loop(too_long, halve, (one, full, jnp.zeros((), jnp.int32)))
+    decreased = jnp.linalg.norm(last[1].r) <= (1.0 - 1e-4 * alpha) * norm
+    take_full = ~decreased & (jnp.linalg.norm(full[1].r) <= ALLOWED_GROWTH * norm)
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(take_full, a, b), full, last)
+
+
+ALLOWED_GROWTH = 10.0
+"""The most a full Newton step may raise the residual norm and still be taken
+by :func:`damped_step` when no shorter one decreases it; a step that raises it
+by orders of magnitude is a cycle of the semi-smooth iteration, never taken."""
 
 
 class NewtonResult(eqx.Module):

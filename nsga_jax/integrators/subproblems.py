@@ -212,7 +212,8 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if law is not None:
             floor = floor + constraint_floor(kp, GT, q - q_prev)
             G_all = jnp.concatenate([G, GT])
-            dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q))
+            dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q),
+                                      res.bound)
             return (dU, dnu), floor
         dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp, res.bound)
         return (dU, dnu), floor
@@ -294,7 +295,7 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
         if with_forces:
             floor = floor + roundoff_floor(h, matrix.K_norm, matrix.C_norm, q, v)
         if law is not None:
-            dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted)
+            dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted, res.bound)
             return (dW, dLam), floor
         dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv, res.bound)
         return (dW, dLam), floor
