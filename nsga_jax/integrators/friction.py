@@ -50,7 +50,6 @@ from ..models.base import Model
 from .linalg import AbstractFactorisation, minimum_norm_split, redundancy_shift
 from .newton import Residual, convergence_bound
 
-
 SLIP_MARGIN = 1e-3
 """How far past the edge of its disk :meth:`FrictionLaw.first_slip` moves the
 first contact to slide, relative to the step that reaches the edge."""
@@ -216,13 +215,13 @@ class FrictionLaw(NamedTuple):
         nc, d = self.unilateral.shape[0], self.d
         normals = jnp.asarray(self.normals)
 
-        def sigma_and_radius(lam_, rate_, with_constant):
+        def sigma_and_radius(lam_, rate_):
             aug = self.k * lam_[:nc] - self.p * rate_[:nc]
             sigma = self.k * lam_[nc:].reshape(-1, d) - self.p_t[:, None] * rate_[nc:].reshape(-1, d)
             return sigma, self.mu * aug[normals]
 
-        a, c = sigma_and_radius(lam, rate, True)
-        b, e = sigma_and_radius(d_lam, d_rate, False)
+        a, c = sigma_and_radius(lam, rate)
+        b, e = sigma_and_radius(d_lam, d_rate)
         active = self(lam, rate).active[normals]
         sticking = active & (c > 0) & (jnp.sum(a**2, axis=1) < c**2)
         qa = jnp.sum(b**2, axis=1) - e**2
