@@ -115,6 +115,7 @@ KINDS = {  # the DS iteration matrices (smooth, position, velocity) each scene's
     # planar rigid bodies: constant mass, no joints, but corners that turn with θ (nonlinear contacts)
     "incline": ("ConstantInverse", "Refactored", "ConstantInverse"),
     "rocking_block": ("ConstantInverse", "Refactored", "ConstantInverse"),
+    "box_stack": ("ConstantInverse", "Refactored", "ConstantInverse"),  # planar boxes, face contacts that turn
 }
 
 

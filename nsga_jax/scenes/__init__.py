@@ -2,6 +2,7 @@
 
 from . import (  # noqa: F401  (registration)
     bouncing_ball,
+    box_stack,
     double_pendulum,
     flexible_appendage,
     flexible_cube,

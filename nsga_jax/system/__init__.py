@@ -8,6 +8,7 @@ from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, Abstract
 from .bodies import PointMass, RigidBody2D
 from .builder import System, check_initial_state
 from .contacts import PlaneContact, SphereContact
+from .face_contact import FaceContact
 from .flexible import Bar, Beam2D
 from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
 from .joints import Distance, Pin, Slider, Weld
@@ -19,7 +20,7 @@ from .solid import HexSolid
 __all__ = [
     "GROUND", "AbstractBody", "AbstractContact", "AbstractForce", "AbstractJoint", "Ground",
     "PointMass", "RigidBody2D", "Bar", "Beam2D", "HexSolid", "System", "check_initial_state", "PlaneContact",
-    "SphereContact",
+    "SphereContact", "FaceContact",
     "Gravity", "PrescribedForce", "SpringDamper", "TorsionalSpring", "Distance", "Pin", "Slider", "Weld",
     "RigidBody3D", "Revolute", "Weld3D",
     "SystemModel",

@@ -20,6 +20,7 @@ from ..validation import Range
 from .base import AbstractPart
 from .bodies import PointMass, RigidBody2D
 from .contacts import PlaneContact, SphereContact
+from .face_contact import FaceContact
 from .flexible import Bar, Beam2D
 from .forces import Gravity, PrescribedForce, SpringDamper, TorsionalSpring
 from .joints import Distance, Pin, Slider, Weld
@@ -32,7 +33,7 @@ CATALOG: dict[str, dict[str, type[AbstractPart]]] = {
                "bar": Bar, "beam_2d": Beam2D, "hex_solid": HexSolid},
     "joints": {"pin": Pin, "distance": Distance, "weld": Weld, "slider": Slider, "revolute": Revolute,
                "weld_3d": Weld3D},
-    "contacts": {"plane": PlaneContact, "sphere": SphereContact},
+    "contacts": {"plane": PlaneContact, "sphere": SphereContact, "face": FaceContact},
     "forces": {"gravity": Gravity, "spring_damper": SpringDamper, "torsional_spring": TorsionalSpring,
                "prescribed": PrescribedForce},
 }
@@ -44,7 +45,7 @@ UNITS: dict[str, str] = {
     "length": "m", "at": "m", "at_a": "m", "at_b": "m", "scale": "m", "origin": "m", "points": "m", "radius": "m",
     "radius_a": "m", "radius_b": "m", "acceleration": "m/s^2", "stiffness": "N/m", "rest_length": "m",
     "damping": "N s/m", "rest_angle": "rad", "direction": "N", "frequency": "Hz", "phase": "rad", "size": "m",
-    "axis": "", "axis_b": "", "rotation": "",
+    "axis": "", "axis_b": "", "rotation": "", "half_extent": "m", "margin": "m", "depth": "m",
 }
 """The SI unit of a float field, by argument name (``""``: dimensionless or not listed)."""
 
