@@ -47,7 +47,7 @@ from jax import lax
 
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
-from .linalg import AbstractFactorisation, minimum_norm_split, redundancy_shift
+from .linalg import AbstractFactorisation, linear_solve, minimum_norm_split, redundancy_shift
 from .newton import Residual, convergence_bound
 
 SLIP_MARGIN = 1e-3
@@ -177,10 +177,24 @@ class FrictionLaw(NamedTuple):
                         (parts.active, parts.aug, parts.impulse[nc:]))
 
     def correction(self, matrix: AbstractFactorisation, r1: Vector, r_c: jax.Array, G_up: jax.Array,
-                   G_low: jax.Array, lam: jax.Array, rate: jax.Array, bound: Scalar) -> tuple[Vector, jax.Array]:
+                   G_low: jax.Array, lam: jax.Array, rate: jax.Array, bound: Scalar | None) -> tuple[Vector, jax.Array]:
         """The semi-smooth Newton correction (dW, dΛ) (module docstring), with
         the law's derivatives at (lam, rate) and the coordinates eliminated
-        through ``matrix`` (the top-left block A)."""
+        through ``matrix`` (the top-left block A).
+
+        Redundant contacts (more contact rows than the coordinates they move:
+        two corners of a block, four of a box) make D singular. The system is
+        then solved for its minimum-norm solution; where it is inconsistent
+        by more than ``bound`` (the sub-problem's tolerance of eq. 51: the
+        active set cannot hold, e.g. both corners of a landing block
+        sticking), the multipliers are moved along the null direction that a
+        vanishing contact compliance D + εI selects, to the first contact
+        that reaches the edge of its disk or opens (:meth:`first_slip`).
+        ``bound = inf``: the minimum-norm solution alone (linear in r₁, r_c);
+        ``None``: the compliant system D + εI solved directly (ε the
+        :func:`~nsga_jax.integrators.linalg.redundancy_shift`; Moreau–Jean's
+        one-level problem, which the minimum-norm solution does not settle).
+        docs/friction.md gives the reasoning."""
         y, B = matrix.solve_with_constraints(r1, G_up)
         if B.shape[1] < G_up.shape[0]:  # a constant matrix holds A^{-1} g_q^T only: add A^{-1} g_T^T
             B = jnp.concatenate([B, matrix.solve(G_up[B.shape[1]:].T)], axis=1)
@@ -195,6 +209,9 @@ class FrictionLaw(NamedTuple):
         # of the contacts given a vanishing compliance (D + shift I)
         shift = redundancy_shift(D.dtype) * jnp.max(jnp.abs(jnp.diagonal(D)))
         compliant = jnp.block([[eye - P_rate @ (D + shift * eye), -P_lam], [R_rate @ (D + shift * eye), R_lam]])
+        if bound is None:  # the compliant solve (Moreau-Jean's one-level problem: docs/friction.md)
+            sol = linear_solve(compliant, rhs)
+            return -y + B @ sol[:m], sol[m:]
         sol, null, inconsistent = minimum_norm_split(system, rhs, compliant)
         null = jnp.where(inconsistent > bound, null, 0.0)  # consistent to the tolerance: the minimum-norm step
         dP, dLam = sol[:m], sol[m:]

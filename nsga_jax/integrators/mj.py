@@ -174,7 +174,7 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
                 lambda y: model.tangent_jacobian(y) @ v)(q)])
         else:
             G_low = jnp.concatenate([G_low, G[nc:]])
-        dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G_low, Lam, G @ v + e_term)
+        dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G_low, Lam, G @ v + e_term, None)
         return (dv, dLam), floor
 
     return Problem.from_update(residual, update)
