@@ -13,8 +13,8 @@ import pytest
 
 import nsga_jax as nj
 from nsga_jax.integrators.model_terms import consistent_acceleration, multiplier_rtol
-from nsga_jax.precision import cast_floats
 from nsga_jax.models.redundancy import RedundantConstraintsWarning, bilateral_redundancy
+from nsga_jax.precision import cast_floats
 from nsga_jax.system import Distance, Pin, RigidBody2D, System, Weld
 
 T_END, H = 0.03, 1e-3

@@ -168,4 +168,5 @@ def conflict(model, q0: Any, tolerance: float) -> str | None:
             "one point): place them alike or remove one")
 
 
-__all__ = ["GAUSS_NEWTON_STEPS", "RANK_RTOL", "Redundancy", "RedundantConstraintsWarning", "bilateral_redundancy", "conflict", "row_names"]
+__all__ = ["GAUSS_NEWTON_STEPS", "RANK_RTOL", "Redundancy", "RedundantConstraintsWarning", "bilateral_redundancy",
+           "conflict", "row_names"]
