@@ -41,7 +41,7 @@ from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
 from .precision import DTYPES, cast_floats, require_x64_for
 from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
-from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
+from .run_inputs import check_initial_state, check_model_instance, check_scheme, redundancy_notes, state_vector
 from .saveat import DEVICE_ONLY, SaveAt, refuse
 from .solution import Observables, Solution, host_solution, with_observables
 from .validation import choice, integer, refuse_traced, require_instance, time_grid
@@ -195,6 +195,7 @@ def simulate(
     q0 = state_vector("q0", q0, model.n_dof)
     v0 = state_vector("v0", v0, model.n_dof)
     check_initial_state(model, q0, v0)
+    notes = redundancy_notes(model, q0)  # reported before the run, kept in its warnings
     refuse(saveat, DEVICE_ONLY, "simulate (host driver)", "nsga_jax.integrate, the pure entry point")
     record_every = saveat.every
     if chunk_size is not None:
@@ -220,7 +221,7 @@ def simulate(
     warnings += invariant_warnings(totals, tolerances, h, t0, frictional_restitution)
     for message in warnings:
         _warnings.warn(message, InvariantWarning, stacklevel=2)
-    sol = with_observables(host_solution(**run, totals=totals, warnings=warnings), observables)
+    sol = with_observables(host_solution(**run, totals=totals, warnings=notes + warnings), observables)
     if error is not None:
         error.solution = sol
         raise error

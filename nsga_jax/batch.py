@@ -38,7 +38,7 @@ from .models.base import Model
 from .monitors import RunTotals
 from .precision import DTYPES, cast_floats, require_x64_for
 from .results import ConfigError, Result
-from .run_inputs import check_initial_state, check_model_instance, check_scheme, state_vector
+from .run_inputs import check_initial_state, check_model_instance, check_scheme, redundancy_notes, state_vector
 from .solution import Observables, Solution, host_solution, with_observables
 from .validation import choice, describe, refuse_traced, require_instance, time_grid
 
@@ -336,6 +336,7 @@ def simulate_batch(
     q0 = state_vector("q0", q0, model.n_dof)
     v0 = state_vector("v0", v0, model.n_dof)
     check_initial_state(model, q0, v0)
+    redundancy_notes(model, q0)  # warned before the batch runs
     if mesh is not None:
         require_instance("mesh", mesh, Mesh, "a jax.sharding.Mesh (nsga_jax.batch.member_mesh)")
     n_steps = np.array([g[3] for g in grids])

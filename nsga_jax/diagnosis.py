@@ -26,7 +26,9 @@ def nonfinite_origin(ops: Operators, initial: StepState) -> str:
     """Why a run met a non-finite value, when it was there before the first
     step: a constant operator computed once for the step size (an inverted
     iteration matrix is not finite when the matrix is singular), or the
-    initial acceleration (M(q0) singular, or f(q0, v0, t0) not finite).
+    initial acceleration (M(q0) singular, or f(q0, v0, t0) or g_q^B(q0) not
+    finite; a rank-deficient g_q^B, redundant joints, is no cause: its
+    multipliers are the minimum-norm ones).
     Checked on the host only after a failure, so it costs a run nothing.
     Returns ``""`` when both are finite."""
 
@@ -43,5 +45,6 @@ def nonfinite_origin(ops: Operators, initial: StepState) -> str:
         causes.append(f"{listed} (computed once for this h) {'is' if len(bad) == 1 else 'are'} not finite: "
                       "a singular matrix (a coordinate with neither mass nor stiffness?)")
     if not finite(initial.vd):
-        causes.append("the initial acceleration is not finite (M(q0) singular, or f(q0, v0, t0) not finite)")
+        causes.append("the initial acceleration is not finite (M(q0) singular, or f(q0, v0, t0) or the "
+                      "bilateral Jacobian g_q^B(q0) not finite)")
     return ("Before the first step, " + "; ".join(causes) + ".") if causes else ""

@@ -7,6 +7,7 @@ are :mod:`nsga_jax.validation`'s."""
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import jax
@@ -15,6 +16,7 @@ import numpy as np
 
 from .integrators.base import AbstractScheme
 from .models.base import Model
+from .models.redundancy import RedundantConstraintsWarning, bilateral_redundancy, conflict
 from .results import ConfigError
 from .validation import IMPACT_LAWS, check_model_fields, choice, describe, integer, real, require_instance
 
@@ -63,7 +65,9 @@ def state_vector(name: str, value: Any, n: int) -> np.ndarray:
 
 
 def check_initial_state(model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9) -> None:
-    """Bilateral constraints satisfied and no penetration at t0."""
+    """Bilateral constraints satisfied and no penetration at t0; bilateral
+    constraints that no position satisfies together are refused as such
+    (:func:`~nsga_jax.models.redundancy.conflict`)."""
     scale = max(1.0, float(np.abs(q0).max(initial=0.0)))
     if model.n_unilateral:
         gap = np.asarray(model.unilateral(jnp.asarray(q0)))
@@ -77,10 +81,25 @@ def check_initial_state(model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9
     if model.n_bilateral:
         g = np.asarray(model.bilateral(jnp.asarray(q0)))
         bad = np.nonzero(~(np.abs(g) <= 1e3 * tol * scale))[0]
+        contradiction = conflict(model, q0, 1e3 * tol * scale) if bad.size and np.all(np.isfinite(g)) else None
+        if contradiction:
+            raise ConfigError(contradiction)
         if bad.size:
             j = int(bad[0])
             raise ConfigError(f"the initial position violates bilateral constraint {j} (g = {g[j]:.6g}); "
                               "start from a configuration that satisfies the joints")
+
+
+def redundancy_notes(model, q0: np.ndarray) -> list[str]:
+    """The report of redundant bilateral constraints at q0
+    (:func:`~nsga_jax.models.redundancy.bilateral_redundancy`), warned
+    (:class:`~nsga_jax.models.redundancy.RedundantConstraintsWarning`) before
+    the run and returned for its ``warnings``; ``[]`` when there are none."""
+    redundancy = bilateral_redundancy(model, q0)
+    if redundancy is None:
+        return []
+    warnings.warn(redundancy.text(), RedundantConstraintsWarning, stacklevel=3)
+    return [redundancy.text()]
 
 
 def check_model_instance(model) -> None:

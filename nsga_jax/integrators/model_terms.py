@@ -348,12 +348,40 @@ def restitution(model: Model, dtype) -> jax.Array:
     return jnp.concatenate([jnp.zeros((model.n_bilateral,), dtype), jnp.asarray(model.restitution, dtype)])
 
 
+MULTIPLIER_RTOL = 1e-10
+"""Relative cut of the pseudo-inverse in :func:`consistent_acceleration`:
+eigenvalues of G M⁻¹ Gᵀ below ``rtol`` times the largest are those of
+redundant rows (their round-off is about eps times the largest, far below),
+never of a mechanism's regular rows (a condition number above 1e10 would be
+one). The cut in use is :func:`multiplier_rtol`, never below the precision's
+round-off."""
+
+
+def multiplier_rtol(dtype) -> float:
+    """The pseudo-inverse's relative cut in precision ``dtype``:
+    ``max(MULTIPLIER_RTOL, 1e3 eps)`` (1e-10 in float64, 1.2e-4 in float32)."""
+    return max(MULTIPLIER_RTOL, 1e3 * float(jnp.finfo(dtype).eps))
+
+
 def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector,
                             mass_solve: Callable[[Vector], Vector] | None = None) -> Vector:
     """v̇̃_0 from the equations of motion with the bilateral constraints at
     acceleration level, unilateral constraints ignored (Algorithm 1, line 2).
     ``mass_solve``: x -> M^{-1} x where M is never assembled (a model without
-    bilateral constraints)."""
+    bilateral constraints).
+
+    With G = g_q^B(q0) and the convective term c = (d(G v)/dq) v, the
+    multipliers solve the Schur complement of the saddle system
+    [[M, -Gᵀ], [G, 0]] (M symmetric positive definite):
+
+        (G M⁻¹ Gᵀ) λ = -c - G M⁻¹ f,   v̇ = M⁻¹ (f + Gᵀ λ),
+
+    with the minimum-norm λ = (G M⁻¹ Gᵀ)⁺ (-c - G M⁻¹ f) (pseudo-inverse cut
+    at :func:`multiplier_rtol`). Where G has full row rank this is the
+    saddle system's unique solution; where it is rank deficient (redundant
+    joints, a closed loop built in 3D) v̇ is still unique and λ is the
+    smallest that holds the constraints: identical rows share the load
+    equally (docs/systems.md, "Redundant constraints")."""
     f = model.force(q0, v0, t0)
     nb = model.n_bilateral
     if mass_solve is not None and nb == 0:
@@ -363,5 +391,9 @@ def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector,
         return jnp.linalg.solve(M, f)
     GB = jax.jacfwd(model.bilateral)(q0)
     conv = jax.jvp(lambda x: jax.jacfwd(model.bilateral)(x) @ v0, (q0,), (v0,))[1]
-    S = jnp.block([[M, -GB.T], [GB, jnp.zeros((nb, nb), M.dtype)]])
-    return jnp.linalg.solve(S, jnp.concatenate([f, -conv]))[: model.n_dof]
+    Minv = jnp.linalg.solve(M, jnp.concatenate([f[:, None], GB.T], axis=1))
+    Minv_f, Minv_Gt = Minv[:, 0], Minv[:, 1:]
+    A = GB @ Minv_Gt
+    A = 0.5 * (A + A.T)  # symmetric up to round-off; the pseudo-inverse of a symmetric matrix
+    lam = jnp.linalg.pinv(A, rtol=multiplier_rtol(A.dtype), hermitian=True) @ (-conv - GB @ Minv_f)
+    return Minv_f + Minv_Gt @ lam

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._custom_types import Vector
+from ..models.redundancy import conflict
 from ..results import ConfigError
 from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint
 from .forces import Gravity
@@ -116,7 +117,9 @@ _compiled_residuals: Any = None
 def check_initial_state(model: SystemModel, q0: Vector, v0: Vector, *, tolerance: float = 1e-9) -> None:
     """Refuse, by name, an initial state that violates a joint (position or
     velocity level, beyond ``tolerance`` times the state's size) or
-    penetrates a contact. The constraints are evaluated by one compiled
+    penetrates a contact; joints that no placement can satisfy together (two
+    welds of one body at different places) are refused as such
+    (:func:`~nsga_jax.models.redundancy.conflict`). The constraints are evaluated by one compiled
     program (compiled once per system structure, so that a sweep's members
     are checked cheaply). Skipped where the state is traced."""
     global _compiled_residuals
@@ -139,6 +142,11 @@ def check_initial_state(model: SystemModel, q0: Vector, v0: Vector, *, tolerance
             raise ConfigError(f"bodies.{name}: the initial orientation is not a rotation (its natural coordinates "
                               f"violate rigidity by {np.abs(own).max():.3g} m)")
         start += b.n_bilateral
+    violated = any(np.abs(g[model.rows("joints", name)]).max(initial=0.0) > tolerance * scale
+                   for name in model.joint_names)
+    contradiction = conflict(model, q0, tolerance * scale) if violated else None
+    if contradiction:  # no placement can satisfy the joints: say so rather than "place the bodies"
+        raise ConfigError(contradiction)
     for name in model.joint_names:
         rows = model.rows("joints", name)
         if np.abs(g[rows]).max(initial=0.0) > tolerance * scale:
