@@ -5,8 +5,7 @@ the cube falling freely from 0.35 m, matrix-free from 500 coordinates) for a
 few steps, timed in phases: building the model (the scene's ``make``), the
 memory check's estimate, compiling, and the steps themselves (with the
 compile apart, as ``Solution.compile_time`` and ``wall_time`` give them).
-The first-step estimate of :mod:`nsga_jax.cost` is printed beside. Run ONE
-size at a time on a shared machine:
+The sizes run one after another, each in its own process:
 
     PYTHONPATH=$PWD python experiments/tools/first_minute.py 8 12 16 20
 """
