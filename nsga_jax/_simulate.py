@@ -19,7 +19,6 @@ counted).
 from __future__ import annotations
 
 import math
-import sys
 import time
 import warnings as _warnings
 from collections.abc import Callable, Iterator
@@ -37,6 +36,7 @@ from .diagnosis import FLOAT32_HINT, nonfinite_origin
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .memory import check_fits
+from .progress import Progress
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
 from .precision import DTYPES, cast_floats, require_x64_for
@@ -93,11 +93,16 @@ def chunk_plan(n_steps: int, length: int, done: int = 0) -> Iterator[tuple[int, 
 
 def chunk_length(model: Model) -> int:
     """Steps per compiled chunk, from the model's size alone (so h and parameter
-    values never change it): a power of two between 64 and 4096, about 2**18
+    values never change it): a power of two between 4 and 4096, about 2**18
     recorded numbers per chunk (4096 steps for a ball, 512 for the 201-node
-    bar, 128 for the 648-dof cube)."""
+    bar, 128 for the 648-dof cube, 4 from 16,384 coordinates). Progress is
+    shown after each chunk and a step's time grows with n, so a large
+    model's first output comes after a few of its steps: 64, the floor
+    before, took about 2 minutes on the cube at 40 divisions. A chunk's host
+    work (its records, energies, totals) measured 10 ms at 14,739
+    coordinates, within the noise of a 0.1 s step (docs/performance.md)."""
     fit = 2**18 // (2 * model.n_dof + 16)
-    return int(min(4096, max(64, 2 ** int(math.floor(math.log2(max(fit, 1)))))))
+    return int(min(4096, max(4, 2 ** int(math.floor(math.log2(max(fit, 1)))))))
 
 
 # filter_jit's wrapper has ``lower`` (compiled ahead of the run); its declared type is the bare function's
@@ -260,7 +265,8 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
     real = np.dtype(dtype).type
 
     args0 = (model, scheme, jnp.asarray(t0, dtype), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h, dtype))
-    tc = time.perf_counter()
+    shown = Progress(n_steps, t0, h, progress)
+    tc = started = shown.compiling(model.n_dof)
     with cache_events() as cached_prep:
         prep = _prepare_and_init.lower(*args0).compile()
     compile_time = time.perf_counter() - tc
@@ -283,6 +289,7 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
             energy_of = energy_of.lower(model, q_shape, q_shape).compile()
     compile_time += time.perf_counter() - tc
     cached = {k: cached[k] + cached_prep[k] for k in cached}
+    shown.compiled(started, compile_source(cached))
 
     chunks, numbers = [], []
     totals = RunTotals(n_bilateral=model.n_bilateral)
@@ -295,7 +302,6 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         totals.start(*np.asarray(energy_of(model, *rows)[0], float))
     first_failure = None
     steps_done = 0
-    shown = time.perf_counter()
     for k, (first, count) in enumerate(chunk_plan(n_steps, length)):
         tw = time.perf_counter()
         t_start = jnp.asarray(real(t0 + (first - 1) * h))
@@ -321,10 +327,7 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         kept, kept_numbers = _every(out, first, record_every, keep_last=last)
         chunks.append(kept)
         numbers.append(kept_numbers)
-        if progress and (last or time.perf_counter() - shown > 0.5):
-            shown = time.perf_counter()
-            print(f"\r  step {steps_done}/{n_steps} ({100.0 * steps_done / n_steps:5.1f} %), "
-                  f"t = {t0 + steps_done * h:.6g} s", end="" if not last else "\n", file=sys.stderr, flush=True)
+        shown.chunk(steps_done, last)
         if halt:
             break
 

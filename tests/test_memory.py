@@ -129,3 +129,33 @@ def test_batch_sweep_and_integrate_are_refused_before_compiling(machine_of):
         sweep("bouncing_ball", {"e": [0.2, 0.5]})
     with pytest.raises(nj.ConfigError, match=r"the model: .* GB estimated for 1 coordinates"):
         nj.integrate(BALL, nj.DS(), 0.0, 1.0, 1e-2, np.array([1.0]), np.array([0.0]))
+
+
+# ------------------------------------------------- the first minute of a large run
+
+
+def test_a_large_model_runs_in_short_chunks_so_its_progress_shows_within_a_minute(cube_40):
+    """The 40-division cube passes the memory check on the matrix-free path
+    (about 8 GB) and steps at about 1.8 s: chunks of 64 steps, the old
+    floor, showed nothing for two minutes; chunks of 4 show each 7 s."""
+    from types import SimpleNamespace
+
+    from nsga_jax._simulate import chunk_length
+
+    assert chunk_length(cube_40.model) == 4
+    assert chunk_length(SimpleNamespace(n_dof=648)) == 128  # the paper's cube, as before
+    assert chunk_length(SimpleNamespace(n_dof=1)) == 4096  # a ball, as before
+
+
+def test_progress_says_it_compiles_then_the_time_a_step_and_the_time_left(capsys, monkeypatch):
+    from nsga_jax import progress
+
+    clock = iter([0.0, 0.0, 26.0, 26.0, 38.0, 38.0])  # created, compiling, compiled (twice), chunk 1 (twice)
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: next(clock))
+    shown = progress.Progress(n_steps=10_000, t0=0.0, h=3e-5, enabled=True)
+    shown.compiled(shown.compiling(206_763), "compiled")
+    shown.chunk(4, last=False)
+    err = capsys.readouterr().err
+    assert "compiling the step (206,763 coordinates) ... 26.0 s\n" in err
+    assert "step 4/10000 (  0.0 %), t = 0.00012 s, 3 s a step, 8.33 h left" in err
+    assert [progress.duration(s) for s in (12.0, 210.0, 18_000.0)] == ["12 s", "3.5 min", "5 h"]

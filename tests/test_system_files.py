@@ -226,6 +226,8 @@ def test_a_changed_file_is_read_again(tmp_path):
 @pytest.mark.usefixtures("no_compilation")
 @pytest.mark.parametrize("command, old, new, fragment", [
     (["run"], 'body = "ball"', 'body = "bal"', "contacts.floor.body = 'bal' names a body that does not exist"),
+    (["run"], 'body = "ball"', 'body = "ground"',
+     "contacts.floor: body = 'ground', the fixed frame; a contact needs a moving body (one of: ball)"),
     (["run"], "mass = 0.5 ", "mas = 0.5 ", "bodies.ball: unknown key 'mas'"),
     (["run"], 'type = "plane"', 'type = "wall"', "contacts.floor.type: unknown contact type 'wall'"),
     (["run", "--set", "bodies.ball.position.1=0.05"], "", "", "contacts.floor: initial penetration of 0.05 m"),

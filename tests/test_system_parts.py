@@ -150,7 +150,22 @@ def test_initial_state_violations_are_named():
 
 
 @pytest.mark.parametrize("add, message", [
-    (lambda s: s.add_joint("j", Pin("ghost", "a")), r"joints\.j: names body 'ghost', which does not exist"),
+    (lambda s: s.add_joint("j", Pin("ghost", "a")), r"joints\.j: body_a = 'ghost' names a body that does not exist"),
+    (lambda s: s.add_contact("c", PlaneContact("ghost", normal=[0.0, 1.0], origin=[0.0, 0.0], e=0.5)),
+     r"contacts\.c: body = 'ghost' names a body that does not exist \(bodies: a, m, ground\)"),
+    # parts that nothing moves: a constant gap, constraint or force, refused before compiling
+    (lambda s: s.add_contact("c", PlaneContact("ground", normal=[0.0, 1.0], origin=[0.0, 0.0], e=0.5)),
+     r"contacts\.c: body = 'ground', the fixed frame; a contact needs a moving body \(one of: a, m\)"),
+    (lambda s: s.add_contact("c", SphereContact("ground", "ground", 0.1, 0.1, 0.5, at_b=[1.0, 0.0])),
+     r"contacts\.c: body_a = body_b = 'ground', the fixed frame; a contact needs a moving body"),
+    (lambda s: s.add_joint("j", Pin("ground", "ground")), r"joints\.j: body_a = body_b = 'ground'.*a joint needs"),
+    (lambda s: s.add_force("f", SpringDamper("ground", "ground", 1.0, 1.0, at_b=[1.0, 0.0])),
+     r"forces\.f: body_a = body_b = 'ground'.*acts on nothing"),
+    (lambda s: s.add_force("f", Gravity([0.0, -9.81], on=("ground",))), r"forces\.f: on = 'ground'"),
+    (lambda s: s.add_joint("j", Pin("a", "a", at_b=[0.5, 0.0])),
+     r"joints\.j: body_a = body_b = 'a', a rigid body; .* its constraint is a constant"),
+    (lambda s: s.add_contact("c", SphereContact("m", "m", 0.1, 0.1, 0.5)),
+     r"contacts\.c: body_a = body_b = 'm', a rigid body; .* its gap is a constant"),
     (lambda s: s.add_joint("j", Pin("ground", "a", at_b=[0.0, 0.0, 1.0])), r"joints\.j: anchor b .*2 coordinates"),
     (lambda s: s.add_contact("c", PlaneContact("a", normal=[0.0, 1.0], origin=[0.0, 0.0], e=0.5, nodes=[0])),
      r"contacts\.c: a rigid body's points are named by points"),
@@ -165,6 +180,26 @@ def test_wrong_references_and_anchors_are_named(add, message):
     add(s)
     with pytest.raises(nj.ConfigError, match=message):
         s.model()
+
+
+def test_a_part_on_the_ground_is_refused_even_when_its_values_are_traced():
+    """The references are structure: checked where the values are traced too
+    (a system built inside a gradient), where the value rules are not."""
+    def build(e):
+        s = System(dim=2)
+        s.add_body("m", PointMass(1.0, [0.0, 1.0]))
+        s.add_contact("c", PlaneContact("ground", normal=[0.0, 1.0], origin=[0.0, 0.0], e=e))
+        return s.model().restitution.sum()
+
+    with pytest.raises(nj.ConfigError, match=r"contacts\.c: body = 'ground'"):
+        jax.grad(build)(0.5)
+
+
+def test_joints_between_nodes_of_one_flexible_body_stand():
+    s = System(dim=2)
+    s.add_body("beam", Beam2D(E=2e9, nu=0.3, rho=1000.0, area=1e-4, second_moment=1e-9, length=1.0, n_elements=4))
+    s.add_joint("ring", Distance("beam", "beam", node_a=0, node_b=4, length=1.0))
+    assert s.model().n_bilateral == 1
 
 
 def test_names_and_fields_are_checked_when_added():

@@ -11,6 +11,7 @@ these thousands of times.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -138,3 +139,44 @@ def constraint_parts(model: SystemModel) -> tuple[AbstractConstraint, ...]:
 def named_parts(model: SystemModel):
     return (("joints", model.joints, model.joint_names), ("contacts", model.contacts, model.contact_names),
             ("forces", model.forces, model.force_names))
+
+
+_WHAT = {"joints": ("a joint", "its constraint is a constant"), "contacts": ("a contact", "its gap is a constant"),
+         "forces": ("a force", "it acts on nothing")}
+
+
+def _body_fields(part) -> list[tuple[str, str]]:
+    """``(field, body name)`` for each field of ``part`` that names a body (``body``,
+    ``body_a``, ``body_b``, gravity's ``on``)."""
+    out = []
+    for field in dataclasses.fields(part):
+        if field.name in ("body", "body_a", "body_b", "on"):
+            value = getattr(part, field.name)
+            out.extend((field.name, v) for v in ((value,) if isinstance(value, str) else value))
+    return out
+
+
+def reference_rule(model: SystemModel) -> str | None:
+    """Why a part's body references cannot stand, or ``None``. Structure only
+    (checked even where the values are traced): a name that is no body; a
+    joint, contact or force on the ground alone (nothing moves: its gap,
+    constraint or force is a constant); a joint or contact between two
+    points of one rigid body (constant too, its Jacobian rows zero)."""
+    moving = ", ".join(model.body_names) or "none"
+    for kind, parts, names in named_parts(model):
+        article, quantity = _WHAT[kind]
+        for part, name in zip(parts, names):
+            refs = _body_fields(part)
+            for field, ref in refs:
+                if ref != GROUND and ref not in model.body_names:
+                    return f"{kind}.{name}: {field} = {ref!r} names a body that does not exist (bodies: {moving}, ground)"
+            if refs and all(ref == GROUND for _, ref in refs):
+                given = " = ".join(dict.fromkeys(field for field, _ in refs))
+                return (f"{kind}.{name}: {given} = 'ground', the fixed frame; {article} needs a moving body "
+                        f"(one of: {moving}): on the ground alone {quantity}")
+            slots = [ref for _, ref in refs]
+            if kind != "forces" and len(slots) == 2 and slots[0] == slots[1] and not body(model, slots[0]).has_nodes:
+                nodes = " (or two nodes of a flexible body)" if kind == "joints" else ""
+                return (f"{kind}.{name}: body_a = body_b = {slots[0]!r}, a rigid body; between two points of one "
+                        f"rigid body {quantity}: name two different bodies{nodes}")
+    return None

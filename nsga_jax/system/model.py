@@ -23,9 +23,10 @@ import jax.numpy as jnp
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
 from ..models.base import Model
+from ..results import ConfigError
 from . import layout
 from . import matrix_free as large
-from .base import GROUND, AbstractBody, AbstractContact, AbstractForce, AbstractJoint
+from .base import AbstractBody, AbstractContact, AbstractForce, AbstractJoint
 from .forces import Gravity
 from .groups import call, gather, scatter_block, scatter_vector, shift
 
@@ -48,6 +49,10 @@ class SystemModel(Model):
     dim: int = eqx.field(static=True)
 
     # ------------------------------------------------------------- structure
+    def __check_init__(self):  # references are structure: checked where values are traced (invalid() is not)
+        if message := layout.reference_rule(self):
+            raise ConfigError(f"{type(self).__name__}.{message}")
+
     def invalid(self) -> str | None:
         names: dict[str, set[str]] = {}
         for kind, group in (("bodies", self.body_names), ("joints", self.joint_names),
@@ -61,10 +66,6 @@ class SystemModel(Model):
                 return f"bodies.{name}: lives in {body.dim} dimensions, the system in {self.dim}"
         for kind, parts, part_names in layout.named_parts(self):
             for part, name in zip(parts, part_names):
-                for ref in part.bodies:
-                    if ref != GROUND and ref not in self.body_names:
-                        known = ", ".join(self.body_names) or "none"
-                        return f"{kind}.{name}: names body {ref!r}, which does not exist (bodies: {known}, ground)"
                 message = part.invalid_on(layout.bodies_of(self, part))
                 if message:
                     return f"{kind}.{name}: {message}"
