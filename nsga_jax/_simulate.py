@@ -36,10 +36,10 @@ from .diagnosis import FLOAT32_HINT, nonfinite_origin
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .memory import check_fits
-from .progress import Progress
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
 from .precision import DTYPES, cast_floats, require_x64_for
+from .progress import Progress
 from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
 from .run_inputs import check_initial_state, check_model_instance, check_scheme, redundancy_notes, state_vector
 from .saveat import DEVICE_ONLY, SaveAt, refuse

@@ -50,6 +50,12 @@ from ..models.base import Model
 from .linalg import AbstractFactorisation, linear_solve, minimum_norm_split, redundancy_shift
 from .newton import Residual, convergence_bound
 
+PIVOT_FRACTION = 0.1
+"""A Newton system of the contact law whose inconsistent part exceeds this
+fraction of the sub-problem's tolerance gets the pivot of
+:meth:`FrictionLaw.first_slip` (the part is measured on the law's rows, not
+on the residual's, hence the margin)."""
+
 SLIP_MARGIN = 1e-3
 """How far past the edge of its disk :meth:`FrictionLaw.first_slip` moves the
 first contact to slide, relative to the step that reaches the edge."""
@@ -209,11 +215,12 @@ class FrictionLaw(NamedTuple):
         # of the contacts given a vanishing compliance (D + shift I)
         shift = redundancy_shift(D.dtype) * jnp.max(jnp.abs(jnp.diagonal(D)))
         compliant = jnp.block([[eye - P_rate @ (D + shift * eye), -P_lam], [R_rate @ (D + shift * eye), R_lam]])
-        if bound is None:  # the compliant solve (Moreau-Jean's one-level problem: docs/friction.md)
-            sol = linear_solve(compliant, rhs)
-            return -y + B @ sol[:m], sol[m:]
+        if bound is None:  # the compliant solve alone (Moreau-Jean's one-level problem: docs/friction.md)
+            regular = linear_solve(compliant, rhs)
+            return -y + B @ regular[:m], regular[m:]
         sol, null, inconsistent = minimum_norm_split(system, rhs, compliant)
-        null = jnp.where(inconsistent > bound, null, 0.0)  # consistent to the tolerance: the minimum-norm step
+        pivot = inconsistent > PIVOT_FRACTION * bound  # else consistent to the tolerance: no pivot
+        null = jnp.where(pivot, null, 0.0)
         dP, dLam = sol[:m], sol[m:]
         dW = -y + B @ dP
         tau = lax.stop_gradient(self.first_slip(lam + dLam, rate + G_low @ dW, null[m:], G_low @ (B @ null[:m])))

@@ -81,8 +81,11 @@ def bilateral_terms(model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     import equinox as eqx
     import jax.numpy as jnp
 
+    def terms(m, x):
+        return m.bilateral(x), m.bilateral_jacobian(x)
+
     if _terms is None:
-        _terms = eqx.filter_jit(lambda m, x: (m.bilateral(x), m.bilateral_jacobian(x)))
+        _terms = eqx.filter_jit(terms)
     g, G = _terms(model, jnp.asarray(q, float))
     return np.asarray(g, float), np.asarray(G, float).reshape(model.n_bilateral, model.n_dof)
 

@@ -148,7 +148,7 @@ _WHAT = {"joints": ("a joint", "its constraint is a constant"), "contacts": ("a 
 def _body_fields(part) -> list[tuple[str, str]]:
     """``(field, body name)`` for each field of ``part`` that names a body (``body``,
     ``body_a``, ``body_b``, gravity's ``on``)."""
-    out = []
+    out: list[tuple[str, str]] = []
     for field in dataclasses.fields(part):
         if field.name in ("body", "body_a", "body_b", "on"):
             value = getattr(part, field.name)
@@ -169,7 +169,8 @@ def reference_rule(model: SystemModel) -> str | None:
             refs = _body_fields(part)
             for field, ref in refs:
                 if ref != GROUND and ref not in model.body_names:
-                    return f"{kind}.{name}: {field} = {ref!r} names a body that does not exist (bodies: {moving}, ground)"
+                    return (f"{kind}.{name}: {field} = {ref!r} names a body that does not exist "
+                            f"(bodies: {moving}, ground)")
             if refs and all(ref == GROUND for _, ref in refs):
                 given = " = ".join(dict.fromkeys(field for field, _ in refs))
                 return (f"{kind}.{name}: {given} = 'ground', the fixed frame; {article} needs a moving body "
