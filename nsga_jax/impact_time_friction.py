@@ -86,8 +86,8 @@ def frictional_impact(model: Model, M: jax.Array, G: jax.Array, q_hit: Vector, v
 
     def correction(x, r):  # Newton's correction, linear in r, with the law's Jacobian at x (stopped)
         W, lam = x
-        # (an infinite bound: the minimum-norm correction alone, never a pivot, so that it stays linear in r)
-        return law_s.correction(matrix, r[:n], r[n:], rows_s, rows_s, lam, rows_s @ (v_s + W) + rest_s, jnp.inf)
+        # (no bound: the compliant solve alone, never a pivot, so that it stays linear in r)
+        return law_s.correction(matrix, r[:n], r[n:], rows_s, rows_s, lam, rows_s @ (v_s + W) + rest_s, None)
 
     def iteration(_, carry):
         x, res = carry

@@ -48,7 +48,7 @@ from jax import lax
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
 from .linalg import AbstractFactorisation, linear_solve, minimum_norm_split, redundancy_shift
-from .newton import Residual, convergence_bound
+from .newton import Residual, convergence_bound, where_needed
 
 PIVOT_FRACTION = 0.1
 """A Newton system of the contact law whose inconsistent part exceeds this
@@ -190,16 +190,18 @@ class FrictionLaw(NamedTuple):
 
         Redundant contacts (more contact rows than the coordinates they move:
         two corners of a block, four of a box) make D singular. The system is
-        then solved for its minimum-norm solution; where it is inconsistent
-        by more than ``bound`` (the sub-problem's tolerance of eq. 51: the
-        active set cannot hold, e.g. both corners of a landing block
-        sticking), the multipliers are moved along the null direction that a
-        vanishing contact compliance D + εI selects, to the first contact
-        that reaches the edge of its disk or opens (:meth:`first_slip`).
-        ``bound = inf``: the minimum-norm solution alone (linear in r₁, r_c);
-        ``None``: the compliant system D + εI solved directly (ε the
-        :func:`~nsga_jax.integrators.linalg.redundancy_shift`; Moreau–Jean's
-        one-level problem, which the minimum-norm solution does not settle).
+        solved with D + εI and D + 2εI (ε the
+        :func:`~nsga_jax.integrators.linalg.redundancy_shift`, a vanishing
+        contact compliance), whose solutions differ in their null-space part
+        n/ε, n/2ε only, and extrapolated to the solution with no null-space
+        part. Where that solution misses the system by more than a tenth of
+        ``bound`` (the sub-problem's tolerance of eq. 51: the active set cannot
+        hold, e.g. both corners of a landing block sticking), the minimum-norm
+        solution and the null direction n are taken by SVD instead, and the
+        multipliers moved along n to the first contact that reaches the edge
+        of its disk or opens (:meth:`first_slip`). ``bound = None``: the
+        compliant solve alone (Moreau–Jean's one-level problem, and the
+        impact-time rebuild, whose correction must be linear in r₁, r_c).
         docs/friction.md gives the reasoning."""
         y, B = matrix.solve_with_constraints(r1, G_up)
         if B.shape[1] < G_up.shape[0]:  # a constant matrix holds A^{-1} g_q^T only: add A^{-1} g_T^T
@@ -211,20 +213,33 @@ class FrictionLaw(NamedTuple):
         Gy = G_low @ y
         system = jnp.block([[eye - P_rate @ D, -P_lam], [R_rate @ D, R_lam]])
         rhs = jnp.concatenate([-P_rate @ Gy, -r_c + R_rate @ Gy])
-        # redundant contacts make D singular: the minimum-norm step, and the null direction
-        # of the contacts given a vanishing compliance (D + shift I)
+        # redundant contacts make D singular: solved with D + εI and D + 2εI, whose solutions differ
+        # in their null-space part n/ε, n/2ε, extrapolated away (module docstring)
         shift = redundancy_shift(D.dtype) * jnp.max(jnp.abs(jnp.diagonal(D)))
-        compliant = jnp.block([[eye - P_rate @ (D + shift * eye), -P_lam], [R_rate @ (D + shift * eye), R_lam]])
-        if bound is None:  # the compliant solve alone (Moreau-Jean's one-level problem: docs/friction.md)
-            regular = linear_solve(compliant, rhs)
+
+        def compliant_matrix(eps):
+            Dc = D + eps * eye
+            return jnp.block([[eye - P_rate @ Dc, -P_lam], [R_rate @ Dc, R_lam]])
+
+        def compliant(eps):
+            return linear_solve(compliant_matrix(eps), rhs)
+
+        regular = compliant(shift)
+        if bound is None:  # the compliant solve alone: Moreau-Jean, the impact-time rebuild (linear in r)
             return -y + B @ regular[:m], regular[m:]
-        sol, null, inconsistent = minimum_norm_split(system, rhs, compliant)
-        pivot = inconsistent > PIVOT_FRACTION * bound  # else consistent to the tolerance: no pivot
-        null = jnp.where(pivot, null, 0.0)
-        dP, dLam = sol[:m], sol[m:]
-        dW = -y + B @ dP
-        tau = lax.stop_gradient(self.first_slip(lam + dLam, rate + G_low @ dW, null[m:], G_low @ (B @ null[:m])))
-        return dW + tau * (B @ null[:m]), dLam + tau * null[m:]
+        sol = 2.0 * compliant(2.0 * shift) - regular  # the solution with no null-space part
+        # inconsistent beyond the tolerance: the active set cannot hold, pivot (module docstring);
+        # then by SVD, as the extrapolation loses the solution's digits to the null part's size
+        pivot = jnp.linalg.norm(system @ sol - rhs) > PIVOT_FRACTION * bound
+
+        def pivoted():
+            x0, null, _ = minimum_norm_split(system, rhs, compliant_matrix(shift))
+            dW = -y + B @ x0[:m]
+            tau = self.first_slip(lam + x0[m:], rate + G_low @ dW, null[m:], G_low @ (B @ null[:m]))
+            return x0 + lax.stop_gradient(tau) * null
+
+        sol = where_needed(pivot, pivoted, sol)
+        return -y + B @ sol[:m], sol[m:]
 
     def first_slip(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array) -> jax.Array:
         """The least τ >= 0 at which a sticking contact of the law at
