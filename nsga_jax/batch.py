@@ -281,10 +281,12 @@ class BatchRun:
 
 
 def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float, n_steps_requested: int,
-                    run: BatchRun, totals: RunTotals | None = None) -> Solution:
+                    run: BatchRun, totals: RunTotals | None = None, warnings: list[str] | None = None) -> Solution:
     """One member's :class:`Solution` from its (NumPy) records. Without
     ``totals`` the records hold every step and give the statistics and the
-    first failure; with them (records strided) those come from ``totals``."""
+    first failure; with them (records strided) those come from ``totals``.
+    ``warnings``: notes of the run kept in ``Solution.warnings`` (the
+    redundancy of its constraints)."""
     records = prepend_initial(model, chunks, t0, q0, v0)
     if totals is None:
         bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
@@ -294,7 +296,8 @@ def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float
         result = Result(int(totals.first_result)) if totals.failed else Result.successful
         n_steps = totals.n_steps
     return host_solution(records, ts=np.asarray(records.t), h=h, n_steps=n_steps, n_steps_requested=n_steps_requested,
-                         result=result, totals=totals, wall_time=run.wall_time, compile_time=run.compile_time)
+                         result=result, totals=totals, wall_time=run.wall_time, compile_time=run.compile_time,
+                         warnings=list(warnings or []))
 
 
 def simulate_batch(
@@ -336,7 +339,7 @@ def simulate_batch(
     q0 = state_vector("q0", q0, model.n_dof)
     v0 = state_vector("v0", v0, model.n_dof)
     check_initial_state(model, q0, v0)
-    redundancy_notes(model, q0)  # warned before the batch runs
+    notes = redundancy_notes(model, q0)  # warned before the batch runs, kept in each member's warnings
     if mesh is not None:
         require_instance("mesh", mesh, Mesh, "a jax.sharding.Mesh (nsga_jax.batch.member_mesh)")
     n_steps = np.array([g[3] for g in grids])
@@ -353,7 +356,8 @@ def simulate_batch(
             if done[b].any():
                 chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
     return [with_observables(member_solution(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype),
-                                             float(hs[b]), int(n_steps[b]), run), observables) for b in range(B)]
+                                             float(hs[b]), int(n_steps[b]), run, warnings=notes), observables)
+            for b in range(B)]
 
 
 __all__ = ["BatchRun", "broadcast_members", "member_mesh", "simulate_batch", "stack_models"]

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser  # noqa: F401  (the options of every command)
+from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser, one_line_warnings  # noqa: F401  (options)
 from .results import ConfigError, ConvergenceError, InvariantError
 
 EXIT_FAILED = 1
@@ -50,6 +50,8 @@ def _run(args) -> int:
     claim_run_folder(out, {"command": "run", "scene": str(args.scene), "parameters": scene.parameters,
                            "solver": scene.solver}, overwrite=args.overwrite)
     _use_cache(args)
+    from ._simulate import InvariantWarning
+    from .models.redundancy import RedundantConstraintsWarning
     from .output import summary, write_run
     from .saveat import SaveAt
 
@@ -61,8 +63,9 @@ def _run(args) -> int:
     failure = None
     saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # every step on disk as it finishes
     try:
-        sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, saveat=saveat,
-                        strict=args.strict)
+        with one_line_warnings(RedundantConstraintsWarning, InvariantWarning):  # printed below, from sol.warnings
+            sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, saveat=saveat,
+                            strict=args.strict)
     except (ConvergenceError, InvariantError) as err:
         assert err.solution is not None  # simulate attaches the run to the errors it raises
         failure, sol = err, err.solution
@@ -377,7 +380,8 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)  # effective where numpy is not loaded yet
     try:
         args = command_parser().parse_args(argv)
-        return COMMANDS[args.command](args)
+        with one_line_warnings():
+            return COMMANDS[args.command](args)
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_INPUT

@@ -6,6 +6,10 @@ Importing this module loads no JAX: ``nsga-jax --help`` answers at once."""
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import cast
 
@@ -144,3 +148,26 @@ def command_parser() -> argparse.ArgumentParser:
     cfg = sub.add_parser("config", help="print a scene's default TOML config")
     cfg.add_argument("scene")
     return p
+
+
+@contextmanager
+def one_line_warnings(*reported: type[Warning]) -> Iterator[None]:
+    """nsga_jax's own warnings as one ``warning: ...`` line each on stderr
+    (once per message), without Python's file and line; the categories in
+    ``reported`` not at all (the command prints them itself, from
+    ``Solution.warnings``). Other libraries' warnings are shown as usual."""
+    shown: set[str] = set()
+    with warnings.catch_warnings():
+        for category in reported:
+            warnings.filterwarnings("ignore", category=category)
+        default = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if not category.__module__.startswith("nsga_jax."):
+                return default(message, category, filename, lineno, file, line)
+            if str(message) not in shown:
+                shown.add(str(message))
+                print(f"warning: {message}", file=sys.stderr)
+
+        warnings.showwarning = show
+        yield

@@ -4,6 +4,8 @@ holds, the multipliers are the minimum-norm ones, the redundancy is reported
 by name before the run, and joints that no position satisfies together are
 refused by name before anything is compiled."""
 
+import subprocess
+import sys
 import warnings
 
 import jax
@@ -159,3 +161,47 @@ def test_a_misplaced_but_satisfiable_joint_keeps_its_own_message():
     s.add_joint("pivot", Pin("ground", "link", at_a=[0.01, 0.0], at_b=[-0.5, 0.0]))
     with pytest.raises(nj.ConfigError, match=r"joints\.pivot: violated at the initial state"):
         s.build()
+
+
+def test_every_member_of_a_batch_carries_the_redundancy_in_its_warnings():
+    model, q0, v0 = pendulum(2).build()
+    with pytest.warns(RedundantConstraintsWarning):
+        sols = nj.simulate_batch(model, nj.DS(), 0.0, 4 * H, [H, 2 * H], q0, v0)
+    for sol in sols:
+        assert sol.warnings[0] == bilateral_redundancy(model, q0).text()
+
+
+TWICE_PINNED = """
+[system]
+dim = 2
+gravity = [0.0, -9.81]
+
+[bodies.link]
+type = "rigid_body_2d"
+mass = 1.0
+inertia = 0.1
+position = [0.5, 0.0]
+""" + "".join(f"""
+[joints.pivot{i}]
+type = "pin"
+body_a = "ground"
+body_b = "link"
+at_b = [-0.5, 0.0]
+""" for i in range(2)) + """
+[solver]
+h = 1e-3
+t_end = 0.003
+"""
+
+
+def test_the_command_line_prints_the_redundancy_once_in_its_own_words(tmp_path):
+    """One ``warning:`` line, without Python's own (file, line and class) even
+    where Python shows every warning (``-W default``)."""
+    path = tmp_path / "twice.toml"
+    path.write_text(TWICE_PINNED)
+    proc = subprocess.run([sys.executable, "-W", "default", "-m", "nsga_jax.cli", "run", str(path), "--out",
+                           str(tmp_path / "out"), "--quiet", "--no-cache"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = [line for line in proc.stderr.splitlines() if "redundant bilateral constraints" in line]
+    assert len(lines) == 1 and lines[0].startswith("warning: redundant bilateral constraints: g_q^B(q0) has rank 2")
+    assert "RedundantConstraintsWarning" not in proc.stderr
