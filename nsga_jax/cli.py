@@ -62,7 +62,7 @@ def _run(args) -> int:
     saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # every step on disk as it finishes
     try:
         sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, saveat=saveat,
-                        strict=args.strict)
+                        strict=args.strict, first_step_limit=args.first_step_limit)
     except (ConvergenceError, InvariantError) as err:
         assert err.solution is not None  # simulate attaches the run to the errors it raises
         failure, sol = err, err.solution

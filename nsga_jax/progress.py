@@ -3,9 +3,12 @@ then after each compiled chunk the steps done, the simulated time, the
 measured time a step and the time left at that rate.
 
 A large model's first output therefore comes after its compilation and one
-chunk (:func:`~nsga_jax._simulate.chunk_length` keeps a large model's
+chunk (:func:`~nsga_jax.chunks.chunk_length` keeps a large model's
 chunks short: four steps of the 40-division cube), never after a silent
-wait of minutes (docs/performance.md, "The first minute of a large run").
+wait of minutes (docs/performance.md, "The first minute of a large run"); a
+dense model whose first step is estimated long
+(:func:`~nsga_jax.first_step.check_first_step`) says so on the compiling
+line and runs its first chunk as a single step.
 """
 
 from __future__ import annotations
@@ -29,10 +32,12 @@ class Progress:
         self.n_steps, self.t0, self.h, self.enabled = n_steps, t0, h, enabled
         self.shown = self.started = time.perf_counter()
 
-    def compiling(self, n_dof: int) -> float:
-        """Say that the step is compiling; returns the time it started."""
+    def compiling(self, n_dof: int, estimate: str | None = None) -> float:
+        """Say that the step is compiling, with the first step's ``estimate``
+        where it is long; returns the time it started."""
         if self.enabled:
-            print(f"  compiling the step ({n_dof:,} coordinates) ...", end="", file=sys.stderr, flush=True)
+            first = f"; first step estimated at {estimate}" if estimate else ""
+            print(f"  compiling the step ({n_dof:,} coordinates{first}) ...", end="", file=sys.stderr, flush=True)
         return time.perf_counter()
 
     def compiled(self, started: float, source: str) -> None:
