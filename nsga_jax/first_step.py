@@ -150,6 +150,12 @@ def estimate_first_step(model: Model, scheme: AbstractScheme, dtype: str = "floa
     return StepEstimate(n, count, rate, flops / rate, measured)
 
 
+def check_limit(name: str, limit: float | None) -> None:
+    """Refuse a limit that is not a positive number of seconds (``inf`` and ``None``: no limit)."""
+    if limit is not None and not limit > 0:
+        raise ConfigError(f"{name} must be a positive number of seconds, inf or None, got {limit}")
+
+
 def check_first_step(model: Model, scheme: AbstractScheme, dtype: str = "float64", *,
                      limit: float | None = LIMIT_SECONDS, what: str = "the model",
                      rate: float | None = None) -> StepEstimate:
@@ -157,6 +163,7 @@ def check_first_step(model: Model, scheme: AbstractScheme, dtype: str = "float64
     before anything is compiled (``limit=None``: never). Raises
     :class:`~nsga_jax.ConfigError` naming the size, the scheme, the estimate
     and what to do. Returns the estimate."""
+    check_limit("first_step_limit", limit)
     est = estimate_first_step(model, scheme, dtype, rate)
     if limit is None or est.seconds <= limit:
         return est
@@ -171,4 +178,4 @@ def check_first_step(model: Model, scheme: AbstractScheme, dtype: str = "float64
 
 
 __all__ = ["INVERSE_LUS", "LIMIT_SECONDS", "LU_RATE", "NOTE_SECONDS", "PROBE_SIZE", "StepEstimate",
-           "check_first_step", "estimate_first_step", "first_step_factorisations", "lu_rate"]
+           "check_first_step", "check_limit", "estimate_first_step", "first_step_factorisations", "lu_rate"]

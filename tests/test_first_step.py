@@ -81,6 +81,8 @@ def test_a_tiny_limit_refuses_before_compiling_and_none_runs_anyway(small_cube, 
     refused = r"the first step of DS on 1 coordinates is estimated at .* limit is 1e-15"
     with pytest.raises(nj.ConfigError, match=refused):
         nj.simulate(BALL, nj.DS(), 0.0, 0.01, 1e-3, [1.0], [0.0], first_step_limit=1e-15)
+    with pytest.raises(nj.ConfigError, match=r"first_step_limit must be a positive number of seconds, inf or None"):
+        nj.simulate(BALL, nj.DS(), 0.0, 0.01, 1e-3, [1.0], [0.0], first_step_limit=-1.0)
     with pytest.raises(nj.ConfigError, match=r"^flexible_cube: the first step of DS on 192 coordinates"):
         small_cube.run(first_step_limit=1e-15)
     with pytest.raises(AssertionError, match="compilation started"):  # past every check
