@@ -246,13 +246,14 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
     (that of the model, scheme, q0 and v0 it is given); returns the solution's pieces (the arguments of
     :func:`~nsga_jax.solution.host_solution`), the running totals and, when
     ``throw`` and a step failed, the error to raise. ``estimate``: the first
-    step's, shown while compiling, where it is long (the first chunk is then one step)."""
+    step's, shown while compiling, where it is long (the first chunk is then one step; later
+    chunks hold the steps of about :data:`~nsga_jax.progress.EVERY_SECONDS`)."""
     length = chunk_size or chunk_length(model)
     real = np.dtype(dtype).type
 
     args0 = (model, scheme, jnp.asarray(t0, dtype), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h, dtype))
     shown = Progress(n_steps, t0, h, progress)
-    tc = started = shown.compiling(model.n_dof, estimate)
+    tc = started = shown.compiling(model.n_dof, estimate)  # a long first step: a first chunk of one
     with cache_events() as cached_prep:
         prep = _prepare_and_init.lower(*args0).compile()
     compile_time = time.perf_counter() - tc
@@ -288,7 +289,7 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         totals.start(*np.asarray(energy_of(model, *rows)[0], float))
     first_failure = None
     steps_done = 0
-    for k, (first, count) in enumerate(chunk_plan(n_steps, length, first=1 if estimate else None)):
+    for k, (first, count) in enumerate(chunk_plan(n_steps, length, cap=shown.next_chunk)):
         tw = time.perf_counter()
         t_start = jnp.asarray(real(t0 + (first - 1) * h))
         state, (packed, done) = run(model, scheme, ops, state, h_arr, t_start, jnp.asarray(count, jnp.int32), stop,

@@ -59,16 +59,16 @@ def load_chunks(out_dir: Path, folder: str = "partial") -> dict[str, np.ndarray]
     return {k: parts[0][k] if k == "subproblems" else np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-def chunk_plan(n_steps: int, length: int, done: int = 0, first: int | None = None) -> Iterator[tuple[int, int]]:
+def chunk_plan(n_steps: int, length: int, done: int = 0,
+               cap: Callable[[], int] | None = None) -> Iterator[tuple[int, int]]:
     """``(first, count)`` of each chunk of a run of ``n_steps`` steps after the
     ``done`` already taken: the step number of the chunk's first step and its
-    number of steps (at most ``length``; the first chunk at most ``first``,
-    e.g. a single slow step, whose progress then shows before the next).
+    number of steps (at most ``length``, and at most ``cap()`` where given,
+    asked before each chunk: fewer steps where a step is slow, so that
+    progress shows; the compiled chunk takes its count at run time).
     Python integers: a run's step count may pass 2**31, a chunk's never does."""
-    cap = length if first is None else min(first, length)
     while done < n_steps:
-        count = min(cap, n_steps - done)
-        cap = length
+        count = min(length, n_steps - done, length if cap is None else max(1, cap()))
         yield done + 1, count
         done += count
 

@@ -107,8 +107,23 @@ def test_a_long_first_step_is_announced_and_run_alone_in_the_first_chunk(monkeyp
     err = capsys.readouterr().err
     assert re.search(r"compiling the step \(1 coordinates; first step estimated at .* for 10 LU factorisations "
                      r"of 1 x 1\) \.\.\.", err)
-    assert list(chunk_plan(10, 4, first=1)) == [(1, 1), (2, 4), (6, 4), (10, 1)]
+    caps = iter([1, 100, 2, 100])
+    assert list(chunk_plan(10, 4, cap=lambda: next(caps))) == [(1, 1), (2, 4), (6, 2), (8, 3)]
     assert list(chunk_plan(10, 4)) == [(1, 4), (5, 4), (9, 2)]
+
+
+def test_a_slow_run_shows_progress_every_ten_seconds_or_so(monkeypatch):
+    from nsga_jax import progress
+
+    clock = iter([0.0, 0.0, 26.0, 59.0, 60.0])  # created, compiling, compiled, after the first step; another run
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: next(clock))
+    shown = progress.Progress(n_steps=10_000, t0=0.0, h=3e-5, enabled=False)
+    shown.compiled(shown.compiling(12_288, "2.75 min for 4 LU factorisations of 12,288 x 12,288"), "compiled")
+    assert shown.next_chunk() == 1  # the long first step alone
+    shown.chunk(1, last=False)
+    assert shown.next_chunk() == 0  # 33 s a step: one a chunk (chunk_plan takes at least one)
+    fast = progress.Progress(n_steps=10, t0=0.0, h=1.0, enabled=False)
+    assert fast.next_chunk() >= 4096  # nothing measured, no long estimate: the chunk length decides
 
 
 def test_the_command_line_refuses_in_one_line_and_runs_anyway_with_inf(tmp_path, capsys, monkeypatch, no_compilation):
