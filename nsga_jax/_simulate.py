@@ -18,10 +18,9 @@ counted).
 
 from __future__ import annotations
 
-import math
 import time
 import warnings as _warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any, cast
 
 import equinox as eqx
@@ -30,9 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .chunks import chunk_files
+from .chunks import chunk_files, chunk_length, chunk_plan
 from .compilation_cache import cache_events, compile_source
 from .diagnosis import FLOAT32_HINT, nonfinite_origin
+from .first_step import LIMIT_SECONDS, NOTE_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
 from .memory import check_fits
@@ -80,31 +80,6 @@ def _run_chunk(model, scheme, ops, state, h, t_start, steps, stop_on_failure, le
     return state, (buffer, jnp.arange(length) < i)
 
 
-def chunk_plan(n_steps: int, length: int, done: int = 0) -> Iterator[tuple[int, int]]:
-    """``(first, count)`` of each chunk of a run of ``n_steps`` steps after the
-    ``done`` already taken: the step number of the chunk's first step and its
-    number of steps (at most ``length``). Python integers: a run's step count
-    may pass 2**31, a chunk's never does."""
-    while done < n_steps:
-        count = min(length, n_steps - done)
-        yield done + 1, count
-        done += count
-
-
-def chunk_length(model: Model) -> int:
-    """Steps per compiled chunk, from the model's size alone (so h and parameter
-    values never change it): a power of two between 4 and 4096, about 2**18
-    recorded numbers per chunk (4096 steps for a ball, 512 for the 201-node
-    bar, 128 for the 648-dof cube, 4 from 16,384 coordinates). Progress is
-    shown after each chunk and a step's time grows with n, so a large
-    model's first output comes after a few of its steps: 64, the floor
-    before, took about 2 minutes on the cube at 40 divisions. A chunk's host
-    work (its records, energies, totals) measured 10 ms at 14,739
-    coordinates, within the noise of a 0.1 s step (docs/performance.md)."""
-    fit = 2**18 // (2 * model.n_dof + 16)
-    return int(min(4096, max(4, 2 ** int(math.floor(math.log2(max(fit, 1)))))))
-
-
 # filter_jit's wrapper has ``lower`` (compiled ahead of the run); its declared type is the bare function's
 _run_chunk_jit = cast(Any, eqx.filter_jit(_run_chunk))
 
@@ -137,6 +112,7 @@ def simulate(
     strict: bool = False,
     tolerances: Tolerances | None = None,
     check_memory: bool = True,
+    first_step_limit: float | None = LIMIT_SECONDS,
 ) -> Solution:
     """Integrate ``model`` from t0 to t1 [s] with step h [s] by ``scheme`` (host driver).
 
@@ -185,6 +161,11 @@ def simulate(
             matrices and kept records would not fit in the available memory
             (:func:`~nsga_jax.memory.check_fits`); ``False`` (or the
             environment variable ``NSGA_JAX_SKIP_MEMORY_CHECK=1``) skips it.
+        first_step_limit: refuse, before compiling, a run on the dense path
+            whose first step is estimated above this many seconds (60 by
+            default; :func:`~nsga_jax.first_step.check_first_step`); ``None``
+            runs anyway. An estimate above 5 s is shown with the compiling
+            line, and the first chunk is then one step.
 
     Everything is validated before anything is traced: wrong Python types
     raise :class:`TypeError`, bad values :class:`ConfigError`. Under
@@ -207,6 +188,8 @@ def simulate(
         chunk_size = integer("chunk_size", chunk_size, 1)
     for name, value in (("throw", throw), ("progress", progress), ("strict", strict), ("check_memory", check_memory)):
         require_instance(name, value, (bool, np.bool_), "True or False")
+    if first_step_limit is not None:
+        require_instance("first_step_limit", first_step_limit, (int, float, np.floating), "a number of seconds or None")
     for name, hook in (("on_chunk", on_chunk), ("observables", observables)):
         if hook is not None and not callable(hook):
             raise TypeError(f"{name} must be a function or None, got {type(hook).__name__}")
@@ -215,12 +198,14 @@ def simulate(
     template = output_template(model, np.dtype(dtype), scheme.subproblems)
     check_fits(model, scheme, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
                record_numbers=sum(packed_sizes(template)), enabled=check_memory)
+    slow = check_first_step(model, scheme, dtype, limit=first_step_limit)
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     if saveat.chunks is not None:
         on_chunk = chunk_files(saveat.chunks, then=on_chunk)
     run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
                                     v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
-                                    on_chunk=on_chunk, record_every=record_every, dtype=dtype)
+                                    on_chunk=on_chunk, record_every=record_every, dtype=dtype,
+                                    estimate=slow.describe() if slow.seconds > NOTE_SECONDS else None)
     frictional_restitution = (bool(model.n_friction) and bool(np.any(np.asarray(model.restitution) > 0))
                               and getattr(scheme, "impact_law", "newton") != "energetic")  # the option is in use
     warnings += invariant_warnings(totals, tolerances, h, t0, frictional_restitution)
@@ -256,17 +241,19 @@ def _energy_of(model: Model):
 
 
 def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
-               record_every, dtype) -> tuple[dict[str, Any], RunTotals, ConvergenceError | None]:
+               record_every, dtype, estimate=None) -> tuple[dict[str, Any], RunTotals, ConvergenceError | None]:
     """The time loop of :func:`simulate` on validated arguments, in ``dtype``
     (that of the model, scheme, q0 and v0 it is given); returns the solution's pieces (the arguments of
     :func:`~nsga_jax.solution.host_solution`), the running totals and, when
-    ``throw`` and a step failed, the error to raise."""
+    ``throw`` and a step failed, the error to raise. ``estimate``: the first
+    step's, shown while compiling, where it is long (the first chunk is then one step; later
+    chunks hold the steps of about :data:`~nsga_jax.progress.EVERY_SECONDS`)."""
     length = chunk_size or chunk_length(model)
     real = np.dtype(dtype).type
 
     args0 = (model, scheme, jnp.asarray(t0, dtype), jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(h, dtype))
     shown = Progress(n_steps, t0, h, progress)
-    tc = started = shown.compiling(model.n_dof)
+    tc = started = shown.compiling(model.n_dof, estimate)  # a long first step: a first chunk of one
     with cache_events() as cached_prep:
         prep = _prepare_and_init.lower(*args0).compile()
     compile_time = time.perf_counter() - tc
@@ -302,7 +289,7 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         totals.start(*np.asarray(energy_of(model, *rows)[0], float))
     first_failure = None
     steps_done = 0
-    for k, (first, count) in enumerate(chunk_plan(n_steps, length)):
+    for k, (first, count) in enumerate(chunk_plan(n_steps, length, cap=shown.next_chunk)):
         tw = time.perf_counter()
         t_start = jnp.asarray(real(t0 + (first - 1) * h))
         state, (packed, done) = run(model, scheme, ops, state, h_arr, t_start, jnp.asarray(count, jnp.int32), stop,

@@ -33,6 +33,7 @@ def _use_cache(args) -> None:
 
 
 def _run(args) -> int:
+    from .first_step import check_limit
     from .folders import claim_run_folder, free_folder
     from .scenes import load_scene, parse_override
     from .validation import integer
@@ -44,6 +45,7 @@ def _run(args) -> int:
             overrides[key] = value
     if args.chunk is not None:
         integer("--chunk", args.chunk, 1)
+    check_limit("--first-step-limit", args.first_step_limit)
     scene = load_scene(args.scene, overrides)
     s = scene.solver
     out = args.out if args.out is not None else free_folder(Path("nsga_out") / scene.name)
@@ -65,7 +67,7 @@ def _run(args) -> int:
     try:
         with one_line_warnings(RedundantConstraintsWarning, InvariantWarning):  # printed below, from sol.warnings
             sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, saveat=saveat,
-                            strict=args.strict)
+                            strict=args.strict, first_step_limit=args.first_step_limit)
     except (ConvergenceError, InvariantError) as err:
         assert err.solution is not None  # simulate attaches the run to the errors it raises
         failure, sol = err, err.solution

@@ -66,6 +66,9 @@ def command_parser() -> argparse.ArgumentParser:
                      help="fail (exit 1) when the energy rises at an impact past its tolerance (default: a warning)")
     run.add_argument("--chunk", type=int, default=None, help="steps per compiled chunk")
     run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.add_argument("--first-step-limit", type=float, default=60.0, metavar="S",
+                     help="refuse a run whose first step is estimated above S seconds (dense iteration matrices "
+                          "factorised: n^3 work; default 60); inf runs anyway")
 
     conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size",
                           parents=parents)

@@ -106,8 +106,8 @@ def dense_matrices(model: Model, scheme: AbstractScheme) -> int:
     """
     from .integrators.iteration_matrix import ConstantInverse
 
-    kinds = [k for k, p in zip(scheme.matrix_kinds(model), _present(model, scheme)) if p]
-    if _assembles_nothing(kinds):
+    kinds = [k for k, p in zip(scheme.matrix_kinds(model), present_subproblems(model, scheme)) if p]
+    if assembles_nothing(kinds):
         return 0
     count = int(model.constant_mass) + 2 * int(model.linear_force)
     count += sum(1 for k in kinds if issubclass(k, ConstantInverse)) + 2 * sum(1 for k in kinds if k.is_held)
@@ -131,7 +131,7 @@ VECTOR_COPIES = 60
 conjugate-gradient work vectors of three sub-problems."""
 
 
-def _assembles_nothing(kinds) -> bool:
+def assembles_nothing(kinds) -> bool:
     from .integrators.krylov import KRYLOV_KINDS
 
     return bool(kinds) and all(issubclass(k, KRYLOV_KINDS) for k in kinds)
@@ -142,8 +142,8 @@ def matrix_free_numbers(model: Model, scheme: AbstractScheme) -> int:
     holds at its peak, per member: :data:`BLOCK_COPIES` arrays of element
     blocks (their size from ``jax.eval_shape``, nothing evaluated) and
     :data:`VECTOR_COPIES` vectors; 0 for a run with dense matrices."""
-    kinds = [k for k, p in zip(scheme.matrix_kinds(model), _present(model, scheme)) if p]
-    if not _assembles_nothing(kinds):
+    kinds = [k for k, p in zip(scheme.matrix_kinds(model), present_subproblems(model, scheme)) if p]
+    if not assembles_nothing(kinds):
         return 0
     import jax
     import jax.numpy as jnp
@@ -152,7 +152,7 @@ def matrix_free_numbers(model: Model, scheme: AbstractScheme) -> int:
     return BLOCK_COPIES * blocks.size + VECTOR_COPIES * model.n_dof
 
 
-def _present(model: Model, scheme: AbstractScheme) -> tuple[bool, bool, bool]:
+def present_subproblems(model: Model, scheme: AbstractScheme) -> tuple[bool, bool, bool]:
     """Which iteration matrices (smooth, position, velocity) a step of
     ``scheme`` solves with: Moreau–Jean's one velocity-level matrix; the
     generalized-α schemes' smooth one, and the other two with constraints."""
@@ -261,4 +261,4 @@ def check_fits(model: Model, scheme: AbstractScheme, itemsize: int = 8, *, membe
 
 
 __all__ = ["OVERHEAD", "RUNTIME_BYTES", "SKIP_ENV", "Estimate", "available_memory", "check_fits", "dense_matrices",
-           "estimate_run_bytes", "matrix_free_numbers", "skipped"]
+           "assembles_nothing", "estimate_run_bytes", "matrix_free_numbers", "present_subproblems", "skipped"]

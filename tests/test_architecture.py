@@ -19,7 +19,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("physics", {"elements", "assembly", "blocks", "models", "system", "exact", "exact_pendulums"}),
     ("numerics", {"integrators", "adjoint", "impact_time", "impact_time_friction"}),
     ("runs", {"saveat", "_integrate", "_simulate", "solution", "monitors", "diagnosis", "batch", "distributed",
-              "run_inputs", "chunks", "memory", "progress"}),
+              "run_inputs", "chunks", "memory", "progress", "first_step"}),
     ("application", {"scenes", "cli", "cli_options", "bench", "sweep", "grid", "identify", "fit_steps", "data",
                      "studies", "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
     ("package", {"__init__"}),

@@ -15,6 +15,7 @@ accepts are left out per option below)."""
 ACCEPTS = {
     "--out": set(MALFORMED),  # any text is a path; an existing file is tried instead
     "--observables": set(),
+    "--first-step-limit": {"1e999"},  # inf: no limit
 }
 
 BASE = {

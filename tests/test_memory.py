@@ -98,10 +98,10 @@ def test_skipping_the_check_goes_on_to_compile(cube_40, machine_of, monkeypatch,
         cube_40.run()
     # ... but not when asked to skip: the run goes on to compile (forbidden here)
     with pytest.raises(AssertionError, match="compilation started"):
-        cube_40.run(check_memory=False)
+        cube_40.run(check_memory=False, first_step_limit=None)  # MJ's dense first step: hours (test_first_step.py)
     monkeypatch.setenv(memory.SKIP_ENV, "1")
     with pytest.raises(AssertionError, match="compilation started"):
-        cube_40.run()
+        cube_40.run(first_step_limit=None)
 
 
 def test_unknown_available_memory_refuses_nothing(cube_40, machine_of):
