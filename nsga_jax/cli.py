@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser, one_line_warnings  # noqa: F401  (options)
+from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser, one_line_warnings, option_names, step_sizes  # noqa: F401  (options)
 from .results import ConfigError, ConvergenceError, InvariantError
 
 EXIT_FAILED = 1
@@ -106,14 +106,6 @@ def _energy_text(energy: dict | None) -> str:
     return f"; energy {energy['initial']:.6g} -> {energy['final']:.6g} J{at_impacts}"
 
 
-def _step_sizes(text: str) -> list[float]:
-    """``--h``: comma-separated step sizes (their ranges are the scene's to check)."""
-    try:
-        return [float(h) for h in text.split(",")]
-    except ValueError:
-        raise ConfigError(f"--h expects comma-separated numbers, got {text!r}") from None
-
-
 def _convergence(args) -> int:
     from .folders import writable_folder
     from .scenes import load_scene, parse_override
@@ -129,13 +121,13 @@ def _convergence(args) -> int:
     for s in schemes + [args.ref_scheme]:
         if s not in SCHEME_NAMES:
             raise ConfigError(f"scheme must be one of {', '.join(SCHEME_NAMES)}, got {s!r}")
-    hs = _step_sizes(args.h)
+    hs = step_sizes(args.h)
     if args.ref_h is not None:
         real("--ref-h", args.ref_h, 0.0, lo_open=True, unit="s")
     scene = load_scene(args.scene, overrides)  # validates everything before anything runs
     for h in hs:
         load_scene(args.scene, {**overrides, "h": h})
-    observables = (_names("--observables", args.observables) if args.observables is not None
+    observables = (option_names("--observables", args.observables) if args.observables is not None
                    else list(scene.spec.error_observables))
     unknown = [k for k in observables if k not in scene.spec.observables]
     if unknown:
@@ -163,14 +155,6 @@ def _convergence(args) -> int:
     return 0
 
 
-def _names(option: str, text: str) -> list[str]:
-    """Comma-separated names of an option, at least one."""
-    names = [k.strip() for k in text.split(",") if k.strip()]
-    if not names:
-        raise ConfigError(f"{option} expects comma-separated names, got {text!r}")
-    return names
-
-
 def _assignments(items: list[str], option: str = "") -> dict:
     """``["a=1,b=2", "c=3"]`` -> ``{"a": 1.0, "b": 2.0, "c": 3.0}``."""
     from .scenes import parse_override
@@ -193,7 +177,7 @@ def _identify(args) -> int:
     for key, value in (("h", args.h), ("t_end", args.t_end)):
         if value is not None:
             overrides[key] = value
-    names = _names("--params", args.params)
+    names = option_names("--params", args.params)
     true: dict[str, Any] | None  # the true values of synthetic data; None for measured data
     true, initial = _assignments(args.true, "--true"), _assignments(args.initial, "--initial")
     for label, values in (("--true", true), ("--initial", initial)):
@@ -214,7 +198,7 @@ def _identify(args) -> int:
             raise ConfigError(f"--params: {k!r} is not a float parameter of {scene.name}; identifiable: "
                               f"{', '.join(floats)}")
     if args.observables is not None:
-        unknown = [k for k in _names("--observables", args.observables) if k not in scene.spec.observables]
+        unknown = [k for k in option_names("--observables", args.observables) if k not in scene.spec.observables]
         if unknown:
             raise ConfigError(f"--observables: unknown observable {unknown[0]!r}; {scene.name} has "
                               f"{', '.join(scene.spec.observables)}")
@@ -224,7 +208,7 @@ def _identify(args) -> int:
     from .identify import Data, identify, synthetic_data, write_identification
 
     if args.synthetic:
-        observables = (_names("--observables", args.observables) if args.observables is not None
+        observables = (option_names("--observables", args.observables) if args.observables is not None
                        else [scene.spec.observables[0]])
         true = {k: scene.parameters[k] for k in names}
         print(f"synthetic data: {scene.name} with {true}, noise {args.noise:g}", file=sys.stderr)
@@ -267,7 +251,7 @@ def _sweep(args) -> int:
         if value is not None:
             integer(name, value, lo)
     grid = parse_grid(args.grid)
-    hs = None if args.h is None else _step_sizes(args.h)
+    hs = None if args.h is None else step_sizes(args.h)
     _use_cache(args)
     hosts = (args.coordinator, args.num_processes, args.process_id)
     if any(x is not None for x in hosts):

@@ -174,3 +174,19 @@ def one_line_warnings(*reported: type[Warning]) -> Iterator[None]:
 
         warnings.showwarning = show
         yield
+
+
+def step_sizes(text: str) -> list[float]:
+    """``--h``: comma-separated step sizes (their ranges are the scene's to check)."""
+    try:
+        return [float(h) for h in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"--h expects comma-separated numbers, got {text!r}") from None
+
+
+def option_names(option: str, text: str) -> list[str]:
+    """Comma-separated names of an option, at least one."""
+    names = [k.strip() for k in text.split(",") if k.strip()]
+    if not names:
+        raise ConfigError(f"{option} expects comma-separated names, got {text!r}")
+    return names
