@@ -179,3 +179,22 @@ def check_first_step(model: Model, scheme: AbstractScheme, dtype: str = "float64
 
 __all__ = ["INVERSE_LUS", "LIMIT_SECONDS", "LU_RATE", "NOTE_SECONDS", "PROBE_SIZE", "StepEstimate",
            "check_first_step", "check_limit", "estimate_first_step", "first_step_factorisations", "lu_rate"]
+
+
+def check_run_fits(model: Model, scheme: AbstractScheme, options: dict, what: str) -> None:
+    """The memory check and the first-step check of a run with ``simulate``'s
+    keyword ``options`` (``dtype``, ``check_memory``, ``first_step_limit``),
+    ahead of it and with ``what`` (a scene's name) in their messages;
+    ``simulate`` checks again, with the records, and validates the rest."""
+    import numpy as np
+
+    from .memory import check_fits
+
+    dtype = options["dtype"]
+    if dtype not in ("float32", "float64"):
+        return
+    if options.get("check_memory", True) is True:
+        check_fits(model, scheme, np.dtype(dtype).itemsize, what=what)
+    limit = options.get("first_step_limit", LIMIT_SECONDS)
+    if isinstance(limit, (int, float)):
+        check_first_step(model, scheme, dtype, limit=limit, what=what)

@@ -350,8 +350,7 @@ def minimum_norm_split(matrix: Matrix, rhs: jax.Array, regularised: Matrix) -> t
     ``regularised`` matrix (``matrix`` plus a small shift): its direction is
     that of the shift's limit, its length of the order of the inconsistent
     part divided by the shift, and the caller chooses the length to take."""
-    # the factors carry no tangent: the split is linear in rhs, the derivative that Newton's implicit
-    # JVP takes, and the SVD's own derivative is NaN where singular values repeat or vanish
+    # factors without tangent: linear in rhs (Newton's implicit JVP); the SVD's own is NaN at σ = 0
     U, sv, Vh = jax.lax.stop_gradient(jnp.linalg.svd(matrix))
     tol = max(MINIMUM_NORM_RTOL, REDUNDANCY_SHIFT_EPS * float(jnp.finfo(matrix.dtype).eps)) * sv[0]
     c = U.T @ rhs

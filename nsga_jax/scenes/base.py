@@ -62,18 +62,12 @@ class Scene:
         (``SaveAt(every=record_every)``); keyword arguments go to
         :func:`~nsga_jax.simulate` (and take precedence)."""
         from .._simulate import simulate
-        from ..first_step import LIMIT_SECONDS, check_first_step
-        from ..memory import check_fits
+        from ..first_step import check_run_fits
         from ..saveat import SaveAt
 
         kwargs = {"dtype": self.solver["dtype"], "saveat": SaveAt(every=self.solver["record_every"]), **kwargs}
         scheme = self.scheme()
-        if kwargs.get("check_memory", True) is True and kwargs["dtype"] in ("float32", "float64"):
-            # the scene's name in the message (simulate checks again, with the records, and validates the rest)
-            check_fits(self.model, scheme, np.dtype(kwargs["dtype"]).itemsize, what=self.name)
-        limit = kwargs.get("first_step_limit", LIMIT_SECONDS)
-        if isinstance(limit, (int, float)) and kwargs["dtype"] in ("float32", "float64"):
-            check_first_step(self.model, scheme, kwargs["dtype"], limit=limit, what=self.name)  # the scene's name
+        check_run_fits(self.model, scheme, kwargs, what=self.name)
         return simulate(
             self.model, scheme, 0.0, self.solver["t_end"], self.solver["h"],
             self.q0, self.v0, observables=self.observables, **kwargs,
