@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
 from typing import Any
 
+from .cli_config import config_command, scenes_command
 from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser, one_line_warnings, option_names, step_sizes  # noqa: F401  (options)
 from .results import ConfigError, ConvergenceError, InvariantError
 
@@ -326,36 +326,8 @@ def _bench(args) -> int:
     return 0
 
 
-def _scenes() -> int:
-    from .scenes import REGISTRY
-
-    for name, spec in sorted(REGISTRY.items()):
-        print(f"{name}: {spec.description}")
-        for key, p in spec.parameters.items():
-            unit = f" [{p.unit}]" if p.unit else ""
-            print(f"    {key} = {p.default!r}{unit}  {p.doc}; {p.range_text()}")
-        print(f"    observables: {', '.join(spec.observables)}")
-    return 0
-
-
-def _config(args) -> int:
-    from .scenes import REGISTRY
-    from .scenes.base import resolve_scene
-
-    name, path = resolve_scene(args.scene)
-    if path is not None:
-        raise ConfigError(f"config takes a scene name or a .py scene file, got the config file {args.scene!r}")
-    text = REGISTRY[name].default_toml()
-    if name != str(args.scene):  # a scene file: the config names it by its absolute path, read from anywhere
-        file, colon, chosen = str(args.scene).partition(".py:")
-        absolute = str(Path(file + ".py" if colon else file).expanduser().resolve()) + (f":{chosen}" if colon else "")
-        text = text.replace(f'scene = "{name}"', f"scene = {json.dumps(absolute)}", 1)
-    print(text, end="")
-    return 0
-
-
 COMMANDS = {"run": _run, "convergence": _convergence, "identify": _identify, "sweep": _sweep, "bench": _bench,
-            "scenes": lambda args: _scenes(), "config": _config}
+            "scenes": scenes_command, "config": config_command}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -28,7 +28,10 @@ class OneLineErrorParser(argparse.ArgumentParser):
 
 
 def command_parser() -> argparse.ArgumentParser:
+    """The parser of ``nsga-jax`` and every subcommand."""
     p = OneLineErrorParser(prog="nsga-jax", description=__doc__)
+    p.add_argument("--version", action="version", version=f"%(prog)s {package_version()}",
+                   help="print the installed version and exit")
     sub = p.add_subparsers(dest="command", required=True)
     cached = argparse.ArgumentParser(add_help=False)
     cached.add_argument("--no-cache", action="store_true",
@@ -148,9 +151,24 @@ def command_parser() -> argparse.ArgumentParser:
     bn.add_argument("--out", type=Path, default=Path("nsga_out/bench"), help="output folder (bench.csv, bench.md)")
 
     sub.add_parser("scenes", help="list the built-in scenes and their parameters")
-    cfg = sub.add_parser("config", help="print a scene's default TOML config")
-    cfg.add_argument("scene")
+    cfg = sub.add_parser("config", help="print a config to save and edit: a scene's default config, or a "
+                                        "config file; --list shows the packaged ones")
+    cfg.add_argument("scene", nargs="?",
+                     help="a built-in scene name, a system file or a .py scene file (its default config), or a "
+                          ".toml config such as configs/rigid_box.toml (printed as it is)")
+    cfg.add_argument("--list", action="store_true",
+                     help="list the configs, system files and example scenes shipped with the package")
     return p
+
+
+def package_version() -> str:
+    """The installed distribution's version (``importlib.metadata``)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("nsga_jax")
+    except PackageNotFoundError:
+        return "(not installed: no package metadata found)"
 
 
 @contextmanager

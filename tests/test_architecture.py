@@ -15,14 +15,14 @@ PACKAGE = Path(__file__).resolve().parents[1] / "nsga_jax"
 
 LAYERS: list[tuple[str, set[str]]] = [
     # (layer, top-level modules or subpackages of nsga_jax), from the bottom up
-    ("foundation", {"_custom_types", "_util", "results", "validation", "precision", "compilation_cache"}),
+    ("foundation", {"_custom_types", "_util", "results", "validation", "precision", "compilation_cache", "packaged"}),
     ("physics", {"elements", "assembly", "blocks", "models", "system", "exact", "exact_pendulums"}),
     ("numerics", {"integrators", "adjoint", "impact_time", "impact_time_friction"}),
     ("runs", {"saveat", "_integrate", "_simulate", "solution", "monitors", "diagnosis", "batch", "distributed",
               "run_inputs", "chunks", "memory", "progress", "first_step"}),
-    ("application", {"scenes", "cli", "cli_options", "bench", "sweep", "grid", "identify", "fit_steps", "data",
-                     "studies", "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
-    ("package", {"__init__"}),
+    ("application", {"scenes", "cli", "cli_options", "cli_config", "bench", "sweep", "grid", "identify", "fit_steps",
+                     "data", "studies", "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
+    ("package", {"__init__", "examples"}),  # examples/: a user's scene file, on the public API
 ]
 LEVEL = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}
 NAME = {i: name for i, (name, _) in enumerate(LAYERS)}

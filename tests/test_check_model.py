@@ -21,7 +21,7 @@ def test_the_worked_example_model_keeps_its_declarations():
     """The user model of docs/own-model.md (the double pendulum) as well."""
     from pathlib import Path
 
-    scene = load_scene(Path(__file__).resolve().parents[1] / "docs/examples/double_pendulum.py")
+    scene = load_scene(Path(__file__).resolve().parents[1] / "nsga_jax/examples/double_pendulum.py")
     checked = nj.check_model(scene.model, scene.q0, scene.v0)
     assert {"sizes", "mass_product", "tangents", "constant_mass"} <= set(checked)
 

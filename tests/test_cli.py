@@ -13,7 +13,7 @@ from nsga_jax.chunks import load_chunks
 from nsga_jax.cli import main
 from nsga_jax.scenes import REGISTRY, load_scene
 
-CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+CONFIGS = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs"
 
 
 def test_run_writes_results(tmp_path, capsys):

@@ -32,7 +32,7 @@ FD_STEP = 1e-6  # relative
 EVENT, DISCRETE = nj.ImpactTimeAdjoint(), nj.DiscreteAdjoint()
 TIGHT = dict(tol_r=1e-12, tol_f=1e-12)
 SCHEMES = {"DSn": nj.DSn(**TIGHT), "MJ": nj.MJ(**TIGHT)}
-SYSTEMS = Path(__file__).resolve().parents[1] / "configs" / "systems"
+SYSTEMS = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "systems"
 BALL_WALLS = str(SYSTEMS / "ball_between_walls.toml")
 
 
@@ -169,7 +169,7 @@ def check_event_gradient(params, loss, exact, rtol=EVENT_RTOL):
 
 # the box dropped flat (configs/extreme/box_flat.toml): four vertices hit at once, six
 # rigidity constraints; it moves like a ball whose height is the centre's minus lz/2
-BOX_FLAT = str(Path(__file__).resolve().parents[1] / "configs" / "extreme" / "box_flat.toml")
+BOX_FLAT = str(Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "extreme" / "box_flat.toml")
 BOX_T = np.arange(0.0, 0.8 + 1e-12, 0.01)  # impacts at 0.32 s and 0.64 s
 HALF = 0.15
 

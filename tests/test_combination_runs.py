@@ -34,7 +34,7 @@ from nsga_jax.metrics import observed_order, relative_l1_error
 from nsga_jax.scenes import load_scene, parametrize
 from nsga_jax.sweep import sweep
 
-SYSTEMS = Path(__file__).resolve().parents[1] / "configs" / "systems"
+SYSTEMS = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "systems"
 BALL_FILE = str(SYSTEMS / "ball_between_walls.toml")
 BLOCK_FILE = str(SYSTEMS / "sliding_block.toml")
 INCLINE = {"t_end": 0.3}  # mu = 0.2 < tan 0.3: the block slides (exact solution known) from the first step

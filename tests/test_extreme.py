@@ -9,7 +9,7 @@ import pytest
 
 from nsga_jax.scenes import load_scene
 
-EXTREME = Path(__file__).resolve().parents[1] / "configs" / "extreme"
+EXTREME = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "extreme"
 G = 9.81
 
 

@@ -1,4 +1,4 @@
-"""The worked example of a user model and scene (docs/examples/double_pendulum.py):
+"""The worked example of a user model and scene (nsga_jax/examples/double_pendulum.py):
 its physics against an independent reference in angle coordinates, and every
 command of the command line on it."""
 
@@ -18,11 +18,11 @@ import nsga_jax
 from nsga_jax.scenes import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLE = "docs/examples/double_pendulum.py"  # relative to ROOT, as the docs write it
+EXAMPLE = "examples/double_pendulum.py"  # as the docs write it: read from the package, from any folder
 
 
 def scene(overrides=None):
-    return load_scene(ROOT / EXAMPLE, overrides)
+    return load_scene(EXAMPLE, overrides)
 
 
 # ----------------------------------------------------- the reference solution
@@ -123,8 +123,8 @@ def test_scene_file_registers_and_refuses_bad_setups():
     assert np.abs(G[:2] @ s.v0).max() < 1e-14
     assert float(s.model.unilateral(s.q0)[0]) > 0
     # the same scene by name in the file, and from the TOML config beside it
-    assert load_scene(f"{ROOT / EXAMPLE}:double_pendulum_masses").name == "double_pendulum_masses"
-    config = load_scene(ROOT / "docs/examples/double_pendulum.toml")
+    assert load_scene(f"{EXAMPLE}:double_pendulum_masses").name == "double_pendulum_masses"
+    config = load_scene(ROOT / "nsga_jax/examples/double_pendulum.toml")
     assert config.name == "double_pendulum_masses" and config.parameters["e"] == 0.5 and config.solver["h"] == 5e-4
     with pytest.raises(nsga_jax.ConfigError, match="wall_x"):
         scene({"wall_x": -0.3})  # the upper mass could reach it
@@ -259,7 +259,7 @@ COMMANDS = {
 @pytest.fixture(scope="module")
 def cli(tmp_path_factory):
     """Start the four commands at once (each compiles its programs; they share
-    the machine's cores), from the repository root as the docs write them;
+    the machine's cores), from a folder that holds no copy of the example;
     ``cli(name)`` waits for one and returns its output folder."""
     base = tmp_path_factory.mktemp("own_model_cli")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
@@ -267,7 +267,7 @@ def cli(tmp_path_factory):
     for name, args in COMMANDS.items():
         out = base / name
         log = open(base / f"{name}.log", "w")
-        procs[name] = (subprocess.Popen([sys.executable, "-m", "nsga_jax.cli", *args, "--out", str(out)], cwd=ROOT,
+        procs[name] = (subprocess.Popen([sys.executable, "-m", "nsga_jax.cli", *args, "--out", str(out)], cwd=base,
                                         env=env, stdout=log, stderr=subprocess.STDOUT), out, log)
 
     def wait(name):

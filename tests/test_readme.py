@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nsga_jax.packaged import packaged
+
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
@@ -201,9 +203,8 @@ def test_every_example_has_a_check_and_every_check_an_example():
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize("example", EXAMPLES, ids=[f"{e.key[0]}: {e.key[1].lstrip('# ')}" for e in EXAMPLES])
 def test_example_runs_as_written(example, tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)  # examples that write files write them here
-    (tmp_path / "docs").mkdir()  # ... and read the example scene files where the pages say (from the root)
-    (tmp_path / "docs" / "examples").symlink_to(ROOT / "docs" / "examples")
+    monkeypatch.chdir(tmp_path)  # examples that write files write them here, and read configs and example
+    # scene files (configs/..., examples/...) from the package, as from any folder
     namespace: dict = {"__name__": "__example__"}
     exec(compile(example.code, str(example.page), "exec", dont_inherit=True), namespace)
     printed = capsys.readouterr().out
@@ -254,7 +255,7 @@ def test_command_parses_with_the_current_options(page, words):
     scene = getattr(args, "scene", None)
     if scene is None or args.command == "config":
         return
-    path = ROOT / scene
+    path = packaged(scene) or ROOT / scene  # configs/... and examples/...: from the package, from any folder
     if scene.endswith(".toml"):
         if not path.exists():
             pytest.skip(f"{scene} is a file the page tells the reader to write")
@@ -322,9 +323,9 @@ def test_every_page_of_docs_is_in_the_index():
 def test_paths_named_in_the_pages_exist():
     named = set()
     for page in PAGES:
-        pattern = r"\b((?:experiments|configs|tests|nsga_jax|docs)/[\w./-]*\w\.(?:py|toml|md|csv|json|png))\b"
+        pattern = r"\b((?:experiments|configs|examples|tests|nsga_jax|docs)/[\w./-]*\w\.(?:py|toml|md|csv|json|png))\b"
         named |= set(re.findall(pattern, page.read_text()))
     assert named
-    missing = sorted(p for p in named if not (ROOT / p).exists() and p not in WRITTEN_ELSEWHERE)
+    missing = sorted(p for p in named if not (ROOT / p).exists() and packaged(p) is None and p not in WRITTEN_ELSEWHERE)
     assert not missing, missing
 

@@ -16,7 +16,7 @@ from nsga_jax.scenes import load_scene
 from nsga_jax.system import FaceContact, RigidBody2D, RigidBody3D
 from nsga_jax.system.contacts import tangent_basis
 
-STACK = Path(__file__).resolve().parents[1] / "configs" / "systems" / "stacked_boxes.toml"
+STACK = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "systems" / "stacked_boxes.toml"
 
 pytestmark = pytest.mark.usefixtures("scene_registry")  # the system file registers a scene (conftest)
 

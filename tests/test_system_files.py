@@ -18,7 +18,7 @@ from nsga_jax.scenes import REGISTRY, configure, load_scene, parametrize
 from nsga_jax.system import PlaneContact, PointMass, RigidBody2D, System, TorsionalSpring
 from nsga_jax.system.catalog import CATALOG, fields
 
-SYSTEMS = Path(__file__).resolve().parents[1] / "configs" / "systems"
+SYSTEMS = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "systems"
 BALL = SYSTEMS / "ball_between_walls.toml"
 PENDULUM = SYSTEMS / "double_pendulum_wall.toml"
 CHAIN = SYSTEMS / "spring_chain.toml"
@@ -301,7 +301,7 @@ def test_bench_takes_a_system_file():
     assert _bench_scene(str(CHAIN)) == "spring_chain"
     assert _bench_scene("bouncing_ball") == "bouncing_ball"
     with pytest.raises(ConfigError, match="not the config"):
-        _bench_scene(str(Path(__file__).resolve().parents[1] / "configs" / "bouncing_ball.toml"))
+        _bench_scene(str(Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "bouncing_ball.toml"))
 
 
 # --------------------------------------------------------------------- runs
@@ -441,7 +441,7 @@ def test_a_written_config_names_its_scene_file_from_anywhere(tmp_path, capsys, m
     """nsga-jax config FILE.py > elsewhere/x.toml, run from a relative path, names
     the file by its absolute path: the config reads back from another folder.
     A config whose scene file is missing says so, not that it is a config."""
-    example = Path(__file__).resolve().parents[1] / "docs" / "examples" / "double_pendulum.py"
+    example = Path(__file__).resolve().parents[1] / "nsga_jax" / "examples" / "double_pendulum.py"
     (tmp_path / "here").mkdir()
     (tmp_path / "there").mkdir()
     monkeypatch.chdir(tmp_path / "here")

@@ -26,9 +26,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from nsga_jax.packaged import ROOT as PACKAGE  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
-EXTREME = Path("configs/extreme")
+EXTREME = PACKAGE / "configs" / "extreme"
 SCHEMES = ("ds", "dsn", "cs", "mj")
 FIELDS = ("case", "scheme", "h", "steps", "outcome", "failed_steps", "first_failure_t", "max_penetration",
           "max_bilateral", "energy_drift", "solves_mean", "solves_max", "wall_s")

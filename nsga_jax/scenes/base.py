@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..packaged import locate
 from ..results import ConfigError
 from .params import SOLVER_PARAMS, Param, check_all, check_solver
 
@@ -250,15 +251,14 @@ def resolve_scene(name_or_path: str | Path, relative_to: Path | None = None) -> 
     config, a ``.toml`` system file (:mod:`nsga_jax.scenes.system_file`,
     registered under its name), a ``.py`` scene file, or ``file.py:name``
     (one of several scenes a file registers). A built-in name is a name even where a file or folder
-    of that name exists."""
+    of that name exists; a relative ``configs/...`` or ``examples/...`` path that does not exist is
+    read from the package (:func:`nsga_jax.packaged.locate`)."""
     text = str(name_or_path)
     if text in REGISTRY and not text.endswith(SCENE_FILE_SUFFIXES):
         return text, None
     file, _, chosen = text.partition(".py:")
     if chosen or text.endswith(".py"):
-        path = Path(file + ".py" if chosen else text)
-        if relative_to is not None and not path.is_absolute():
-            path = relative_to / path
+        path = locate(file + ".py" if chosen else text, relative_to)
         names = load_scene_file(path)
         if chosen:
             if chosen not in names:
@@ -271,9 +271,7 @@ def resolve_scene(name_or_path: str | Path, relative_to: Path | None = None) -> 
     if text.endswith(".toml"):
         from .system_file import is_system_file, load_system_file
 
-        path = Path(text).expanduser()
-        if relative_to is not None and not path.is_absolute():
-            path = relative_to / path
+        path = locate(text, relative_to)
         if not path.is_file():
             where = f" (a config's scene is read relative to the config's folder, {str(relative_to)!r})" \
                 if relative_to is not None else ""

@@ -3,12 +3,12 @@
 This file is a worked example of writing one's own model and scene (see
 ``docs/own-model.md``). Give its path wherever a scene name is taken::
 
-    nsga-jax run docs/examples/double_pendulum.py --t-end 2
-    nsga-jax sweep docs/examples/double_pendulum.py --grid 'e=0.2;0.8'
-    nsga-jax convergence docs/examples/double_pendulum.py --h 4e-3,2e-3 --ref-h 5e-4
-    nsga-jax identify docs/examples/double_pendulum.py --params e --synthetic --true e=0.5 --initial e=0.6
+    nsga-jax run examples/double_pendulum.py --t-end 2
+    nsga-jax sweep examples/double_pendulum.py --grid 'e=0.2;0.8'
+    nsga-jax convergence examples/double_pendulum.py --h 4e-3,2e-3 --ref-h 5e-4
+    nsga-jax identify examples/double_pendulum.py --params e --synthetic --true e=0.5 --initial e=0.6
 
-    scene = nsga_jax.load_scene("docs/examples/double_pendulum.py", {"e": 0.3})
+    scene = nsga_jax.load_scene("examples/double_pendulum.py", {"e": 0.3})
     sol = nsga_jax.integrate(scene.model, nsga_jax.DS(), 0.0, 0.5, 1e-3, scene.q0, scene.v0,
                              adjoint=nsga_jax.ImpactTimeAdjoint())  # differentiable; sees the impact instant move
 
