@@ -310,7 +310,7 @@ def _bench(args) -> int:
     from .folders import writable_folder
     from .validation import real
 
-    scenes = None if args.scenes is None else [_bench_scene(s.strip()) for s in args.scenes.split(",")]
+    scenes = None if args.scenes == "all" else [_bench_scene(s.strip()) for s in args.scenes.split(",")]
     try:
         batches = [int(b) for b in args.batch.split(",")]
     except ValueError:

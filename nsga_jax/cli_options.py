@@ -1,5 +1,6 @@
 """The command line's options: one argparse parser per subcommand, with
-one-line errors (``error: ...``, exit 2) instead of a usage block.
+one-line errors (``error: ...``, exit 2) instead of a usage block, and a
+help text for every option.
 
 Importing this module loads no JAX: ``nsga-jax --help`` answers at once."""
 
@@ -18,6 +19,20 @@ from .validation import IMPACT_LAWS, SCHEME_NAMES
 
 CACHE_ENV = "NSGA_JAX_CACHE"
 
+DESCRIPTION = ("Nonsmooth dynamics of multibody systems (rigid and flexible bodies, joints, impacts, Coulomb "
+               "friction) with the decoupled nonsmooth generalized-alpha scheme: simulate a scene, measure "
+               "convergence, sweep parameters, fit parameters to data, benchmark.")
+"""What ``nsga-jax --help`` says first."""
+
+EPILOG = ("`nsga-jax COMMAND --help` lists a command's options. `nsga-jax scenes` lists the built-in scenes; "
+          "`nsga-jax config --list` the configs and example scenes shipped with the package, which every "
+          "command reads by name from any folder (e.g. `nsga-jax run configs/rigid_box.toml`). Bad input is "
+          "refused with one line `error: ...` (exit status 2).")
+"""What ``nsga-jax --help`` says last."""
+
+BENCH_SCENES = "impacting_bar"
+"""``nsga-jax bench``'s default scene: one, so that the bench without options takes a minute or two."""
+
 
 class OneLineErrorParser(argparse.ArgumentParser):
     """argparse with one-line errors (``error: ...``, exit 2) instead of a
@@ -29,10 +44,10 @@ class OneLineErrorParser(argparse.ArgumentParser):
 
 def command_parser() -> argparse.ArgumentParser:
     """The parser of ``nsga-jax`` and every subcommand."""
-    p = OneLineErrorParser(prog="nsga-jax", description=__doc__)
+    p = OneLineErrorParser(prog="nsga-jax", description=DESCRIPTION, epilog=EPILOG)
     p.add_argument("--version", action="version", version=f"%(prog)s {package_version()}",
                    help="print the installed version and exit")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     cached = argparse.ArgumentParser(add_help=False)
     cached.add_argument("--no-cache", action="store_true",
                         help="compile afresh and keep nothing on disk (default: compiled programs are kept in "
@@ -107,7 +122,8 @@ def command_parser() -> argparse.ArgumentParser:
                        help="--synthetic: Gaussian noise, as a fraction of each observable's RMS")
     ident.add_argument("--every", type=int, default=1, help="--synthetic: keep every n-th step as a sample")
     ident.add_argument("--seed", type=int, default=0, help="--synthetic: seed of the noise")
-    ident.add_argument("--optimizer", choices=("lbfgs", "adam"), default="lbfgs")
+    ident.add_argument("--optimizer", choices=("lbfgs", "adam"), default="lbfgs",
+                       help="lbfgs (default: L-BFGS with a line search) or adam (first-order, --learning-rate)")
     ident.add_argument("--adjoint", choices=("discrete", "event"), default="discrete",
                        help="the simulated loss's own derivative (default: fewer evaluations for the same "
                             "fits, docs/gradients.md), or gradients that see impact instants move")
@@ -138,12 +154,18 @@ def command_parser() -> argparse.ArgumentParser:
     hosts.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
     hosts.add_argument("--process-id", type=int, metavar="I", help="this process's index, in [0, N)")
 
-    bn = sub.add_parser("bench", help="time per step, batched throughput, compile time, float32 vs float64")
-    bn.add_argument("--scenes", help="comma-separated scenes: names, .py scene files or system files "
-                                          "(default: all built-in)")
-    bn.add_argument("--batch", default="1,64,1024", help="comma-separated batch sizes (default 1,64,1024)")
-    bn.add_argument("--dtype", default="float64,float32", help="comma-separated precisions")
-    bn.add_argument("--scheme", choices=SCHEME_NAMES, default="ds")
+    bn = sub.add_parser("bench", help="time per step, batched throughput, compile time, float32 vs float64 "
+                                      "(default: a quick bench of one scene; --scenes all for every scene)",
+                        epilog="The full table of every scene: nsga-jax bench --scenes all --batch 1,64,1024 "
+                               "--dtype float64,float32")
+    bn.add_argument("--scenes", default=BENCH_SCENES,
+                    help="comma-separated scenes: names, .py scene files or system files, or `all` for every "
+                         f"built-in scene (default {BENCH_SCENES})")
+    bn.add_argument("--batch", default="1,64", help="comma-separated batch sizes (default 1,64)")
+    bn.add_argument("--dtype", default="float64",
+                    help="comma-separated precisions, float64 and/or float32 (default float64; float64,float32 "
+                         "adds float32's time and its distance from float64)")
+    bn.add_argument("--scheme", choices=SCHEME_NAMES, default="ds", help="time integration scheme (default ds)")
     bn.add_argument("--repeats", type=int, default=3, help="runs per configuration; the fastest counts")
     bn.add_argument("--max-steps", type=int, default=2000, help="steps per run at most (default 2000)")
     bn.add_argument("--max-seconds", type=float, default=60.0,
