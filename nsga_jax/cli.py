@@ -79,7 +79,7 @@ def _run(args) -> int:
     info = summary(sol, scene.name, s["scheme"],
                    {"parameters": scene.parameters, "solver": scene.solver,
                     "error": str(failure) if failure else None})
-    paths = write_run(sol, out, info)
+    paths = write_run(sol, out, info, plots=not args.no_plots)
     st = sol.stats
     iterations = ", ".join(f"{name} {it['mean']:.2f}/{it['max']}" for name, it in st["iterations"].items()
                            if name != "linear_solves")
@@ -144,7 +144,7 @@ def _convergence(args) -> int:
         print(f"reference: {args.ref_scheme.upper()} at h = {args.ref_h:g} s ...", file=sys.stderr)
         reference = make_reference(args.scene, {**overrides, "scheme": args.ref_scheme}, args.ref_h)
     rows = study(args.scene, schemes, hs, reference, overrides, observables, mode=args.mode)
-    paths = write_study(rows, out, scene.name, reference)
+    paths = write_study(rows, out, scene.name, reference, plots=not args.no_plots)
     for r in rows:
         errs = ", ".join(f"{k} {e:.3e}" for k, e in r.errors.items())
         it = r.iterations["linear_solves"]
@@ -226,7 +226,8 @@ def _identify(args) -> int:
     result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
                       progress=True, max_steps=args.max_steps, learning_rate=args.learning_rate, true=true,
                       adjoint=adjoint_named(args.adjoint))
-    paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}", scene=scene)
+    paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}", scene=scene,
+                                 plots=not args.no_plots)
     for k in names:
         line = f"{k}: initial {result.initial[k]:.6g} -> recovered {result.recovered[k]:.6g}"
         if true is not None:
@@ -273,7 +274,7 @@ def _sweep(args) -> int:
     try:
         result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
                        batch_size=args.batch_size, devices=devices, max_records=args.max_records,
-                       progress=not args.quiet)
+                       progress=not args.quiet, plots=not args.no_plots)
     except KeyboardInterrupt:
         kept = sorted((Path(out) / "batches").glob("batch_*.csv"))
         print(f"\ninterrupted: {len(kept)} finished batch(es) kept in {Path(out) / 'batches'}; the same command "
@@ -286,7 +287,7 @@ def _sweep(args) -> int:
         print(f"warning: run {row['member']} ({swept}) failed at {row['failed_steps']} step(s): {row['result']}",
               file=sys.stderr)
     if result.path is not None:
-        print(f"wrote {result.path} and {result.plot}")
+        print("wrote " + " and ".join(str(p) for p in (result.path, result.plot) if p is not None))
     else:
         print(f"process {jax.process_index()} of {jax.process_count()}: process 0 writes the files")
     return 0

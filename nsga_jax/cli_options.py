@@ -53,8 +53,11 @@ def command_parser() -> argparse.ArgumentParser:
                         help="compile afresh and keep nothing on disk (default: compiled programs are kept in "
                              f"${CACHE_ENV} or ~/.cache/nsga_jax/xla, and a later run of the same scene structure, "
                              "with any h and parameter values, loads them instead of compiling)")
+    plotted = argparse.ArgumentParser(add_help=False)
+    plotted.add_argument("--no-plots", action="store_true",
+                         help="write no PNG plots, only the data files (faster: no figure is drawn)")
     # typeshed wants parents of the subparsers' own class (OneLineErrorParser); argparse copies any parser's arguments
-    parents = cast(list[OneLineErrorParser], [cached])
+    parents = cast(list[OneLineErrorParser], [cached, plotted])
 
     run = sub.add_parser("run", help="simulate a built-in scene or a TOML config", parents=parents)
     run.add_argument("scene", help="scene name (see `nsga-jax scenes`), a .toml config or system file, or a .py "

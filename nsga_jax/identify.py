@@ -290,8 +290,8 @@ def identify(
 
 
 def write_identification(result: Identification, data: Data, out_dir, title: str = "", *,
-                         scene=None) -> dict[str, Path]:
-    """Write ``identification.json``, ``loss.png`` (loss per iteration) and
+                         scene=None, plots: bool = True) -> dict[str, Path]:
+    """Write ``identification.json`` and, with ``plots``, ``loss.png`` (loss per iteration) and
     ``fit.png`` (data, initial and fitted observables against t [s]); returns
     the paths.
 
@@ -305,6 +305,8 @@ def write_identification(result: Identification, data: Data, out_dir, title: str
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "identification.json", "loss": out / "loss.png", "fit": out / "fit.png"}
     paths["json"].write_text(json.dumps(result.summary(), indent=2) + "\n")
+    if not plots:
+        return {"json": paths["json"]}
     solver = getattr(scene, "solver", None) or {}
     spec = plotting.scene_spec(scene)
     found = ", ".join(f"{k}: {result.initial[k]:.4g} → {result.recovered[k]:.4g}"

@@ -38,8 +38,8 @@ def summary(sol: Solution, scene: str, scheme: str, extra: dict[str, Any] | None
     return out
 
 
-def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, Path]:
-    """Write trajectory.npz, summary.json and PNG plots; returns the paths written."""
+def write_run(sol: Solution, out_dir: Path, info: dict[str, Any], *, plots: bool = True) -> dict[str, Path]:
+    """Write trajectory.npz, summary.json and (``plots``) the PNG plots; returns the paths written."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {}
@@ -54,9 +54,10 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any]) -> dict[str, P
     paths["summary"] = out_dir / "summary.json"
     paths["summary"].write_text(json.dumps(info, indent=2) + "\n")
     scene, scheme = info.get("scene", ""), info.get("scheme", "")
-    if any(np.ndim(v) == 1 for v in sol.observables.values()):
+    if plots and any(np.ndim(v) == 1 for v in sol.observables.values()):
         paths["observables_plot"] = plot_observables(sol, out_dir / "observables.png", scene, scheme=scheme)
-    paths["iterations_plot"] = plot_iterations(sol, out_dir / "iterations.png", scene, scheme=scheme)
+    if plots:
+        paths["iterations_plot"] = plot_iterations(sol, out_dir / "iterations.png", scene, scheme=scheme)
     partial = out_dir / "partial"
     if len(sol.ts) == sol.n_steps + 1:  # every step is in trajectory.npz
         shutil.rmtree(partial, ignore_errors=True)

@@ -208,8 +208,9 @@ def slopes(rows: list[StudyRow]) -> dict[tuple[str, str], float]:
     return out
 
 
-def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Reference) -> dict[str, Path]:
-    """study.csv, convergence.png (error vs h with slopes), iterations.png (mean and
+def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Reference, *,
+                plots: bool = True) -> dict[str, Path]:
+    """study.csv and, with ``plots``, convergence.png (error vs h with slopes), iterations.png (mean and
     max linear solves per step vs h, failures marked) and work_precision.png
     (error vs wall time [s], joined in the order of h). ``title`` names the
     scene; every figure's title adds the schemes and the range of h [s].
@@ -222,6 +223,8 @@ def write_study(rows: list[StudyRow], out_dir: Path, title: str, reference: Refe
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out_dir / "study.csv"}
     write_csv(paths["csv"], [r.flat() for r in rows])
+    if not plots:
+        return paths
     schemes = list(dict.fromkeys(r.scheme for r in rows))
     names = list(rows[0].errors)
     order = slopes(rows)

@@ -187,6 +187,7 @@ def sweep(
     max_records: int = 2000,
     progress: bool = False,
     on_batch: Callable[[int, list[dict]], None] | None = None,
+    plots: bool = True,
 ) -> SweepResult:
     """Run ``scene`` for every combination of the ``grid``'s values (and of ``hs``).
 
@@ -207,6 +208,7 @@ def sweep(
         max_records: recorded steps kept per member for observables and errors.
         progress: a progress bar over batches on stderr.
         on_batch: called as ``on_batch(k, rows)`` after batch k is written.
+        plots: write ``sweep.png`` beside ``sweep.csv`` (with ``out``).
     """
     if isinstance(max_records, bool) or not isinstance(max_records, (int, np.integer)) or max_records < 1:
         raise ConfigError(f"max_records must be an integer >= 1, got {max_records!r}")
@@ -258,7 +260,7 @@ def sweep(
     if out_dir is not None and jax.process_index() == 0:
         result.path = out_dir / "sweep.csv"
         write_csv(result.path, result.rows)
-        result.plot = plot_sweep(result, out_dir / "sweep.png")
+        result.plot = plot_sweep(result, out_dir / "sweep.png") if plots else None
     return result
 
 

@@ -1,5 +1,5 @@
 """The command line's surface: help written for users, a help text for every
-option of every command, a quick default ``bench``."""
+option of every command, a quick default ``bench``, ``--no-plots``."""
 
 from __future__ import annotations
 
@@ -49,3 +49,22 @@ def test_bench_defaults_to_a_quick_bench_and_all_asks_for_every_scene(tmp_path, 
     assert main(["bench", "--scenes", "all", "--batch", "1,64,1024", "--dtype", "float64,float32",
                  "--out", str(tmp_path / "all")]) == 0
     assert calls[-1] == (None, [1, 64, 1024], ["float64", "float32"], "ds")  # None: every built-in scene
+
+
+COMMANDS = {
+    "run": ["run", "bouncing_ball", "--t-end", "0.2", "--quiet"],
+    "sweep": ["sweep", "bouncing_ball", "--grid", "e=0.2;0.8", "--set", "t_end=0.2", "--quiet"],
+    "convergence": ["convergence", "bouncing_ball", "--h", "1e-2,5e-3", "--ref", "exact", "--t-end", "0.6"],
+    "identify": ["identify", "bouncing_ball", "--params", "e", "--synthetic", "--true", "e=0.7", "--initial",
+                 "e=0.6", "--t-end", "0.6", "--h", "1e-2", "--max-steps", "2"],
+}
+"""Each command that draws plots, on the ball, short."""
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_no_plots_writes_the_data_and_no_png(name, tmp_path):
+    out = tmp_path / name
+    assert main([*COMMANDS[name], "--no-plots", "--out", str(out)]) in (0, 1)  # identify may stop unconverged
+    files = sorted(p.name for p in out.rglob("*") if p.is_file())
+    assert files and not [f for f in files if f.endswith(".png")], files
+    assert any(f.endswith((".npz", ".csv", ".json")) for f in files)
