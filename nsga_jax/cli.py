@@ -33,8 +33,8 @@ def _use_cache(args) -> None:
 
 
 def _run(args) -> int:
-    from .first_step import check_limit
-    from .folders import claim_run_folder, free_folder
+    from .first_step import check_limit, check_run_fits
+    from .folders import claim_run_folder, first_missing, free_folder, release_run_folder
     from .scenes import load_scene, parse_override
     from .validation import integer
 
@@ -48,7 +48,10 @@ def _run(args) -> int:
     check_limit("--first-step-limit", args.first_step_limit)
     scene = load_scene(args.scene, overrides)
     s = scene.solver
+    check_run_fits(scene.model, scene.scheme(), {"dtype": s["dtype"], "first_step_limit": args.first_step_limit},
+                   what=scene.name)  # the memory and first-step refusals come before a folder is claimed
     out = args.out if args.out is not None else free_folder(Path("nsga_out") / scene.name)
+    created = first_missing(out)  # what a run refused later (its records' memory) removes again
     claim_run_folder(out, {"command": "run", "scene": str(args.scene), "parameters": scene.parameters,
                            "solver": scene.solver}, overwrite=args.overwrite)
     _use_cache(args)
@@ -71,6 +74,9 @@ def _run(args) -> int:
     except (ConvergenceError, InvariantError) as err:
         assert err.solution is not None  # simulate attaches the run to the errors it raises
         failure, sol = err, err.solution
+    except ConfigError:  # refused before its first step: no folder holding only run.json is left
+        release_run_folder(out, created)
+        raise
     except KeyboardInterrupt:
         kept = sorted((Path(out) / "partial").glob("chunk_*.npz"))
         print(f"\ninterrupted: {len(kept)} finished chunk(s) of steps kept in {Path(out) / 'partial'} "

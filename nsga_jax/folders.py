@@ -62,6 +62,37 @@ def claim_run_folder(path: Path, description: dict, *, overwrite: bool = False) 
     return path
 
 
+def first_missing(path: Path) -> Path | None:
+    """The outermost of ``path`` and its parents that does not exist yet (what
+    claiming ``path`` creates), or ``None`` where ``path`` exists."""
+    path = Path(path).expanduser().absolute()
+    if path.exists():
+        return None
+    while not path.parent.exists():
+        path = path.parent
+    return path
+
+
+def release_run_folder(path: Path, created: Path | None) -> None:
+    """Undo the claim of a run that was refused before its first step: delete
+    its ``run.json`` and an empty ``partial/``, then ``path`` and its parents
+    up to ``created`` (:func:`first_missing` before the claim) where they are
+    empty, so that a refused run leaves no folder behind. A folder that existed
+    before the claim is kept."""
+    path = Path(path).expanduser().absolute()
+    (path / "run.json").unlink(missing_ok=True)
+    for folder in (path / "partial", path):
+        if folder.is_dir() and not any(folder.iterdir()) and (folder != path or created is not None):
+            folder.rmdir()
+    if created is None:
+        return
+    created = created.absolute()
+    while path != created and path.is_relative_to(created) and path.parent.is_dir() \
+            and not any(path.parent.iterdir()):
+        path = path.parent
+        path.rmdir()
+
+
 def free_folder(base: Path) -> Path:
     """``base`` if it holds no earlier run, else the first of ``base_2``,
     ``base_3``, ... that holds none (the default output folder of a run)."""
@@ -73,4 +104,5 @@ def free_folder(base: Path) -> Path:
     return candidate
 
 
-__all__ = ["RUN_FILES", "claim_run_folder", "earlier_run_files", "free_folder", "writable_folder"]
+__all__ = ["RUN_FILES", "claim_run_folder", "earlier_run_files", "first_missing", "free_folder",
+           "release_run_folder", "writable_folder"]

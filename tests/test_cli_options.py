@@ -1,5 +1,6 @@
 """The command line's surface: help written for users, a help text for every
-option of every command, a quick default ``bench``, ``--no-plots``."""
+option of every command, a quick default ``bench``, ``--no-plots``, refused
+runs that leave no folder behind."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import argparse
 import pytest
 
 from nsga_jax import bench as bench_module
-from nsga_jax.cli import main
+from nsga_jax.cli import EXIT_INPUT, main
 from nsga_jax.cli_options import BENCH_SCENES, command_parser
 
 
@@ -68,3 +69,24 @@ def test_no_plots_writes_the_data_and_no_png(name, tmp_path):
     files = sorted(p.name for p in out.rglob("*") if p.is_file())
     assert files and not [f for f in files if f.endswith(".png")], files
     assert any(f.endswith((".npz", ".csv", ".json")) for f in files)
+
+
+@pytest.mark.parametrize("existed", [False, True])
+def test_a_run_refused_after_its_checks_leaves_no_folder(tmp_path, capsys, existed):
+    out = tmp_path / "new" / "ball"
+    if existed:
+        out.mkdir(parents=True)
+    # its records would not fit: refused by simulate, after the folder was claimed
+    assert main(["run", "bouncing_ball", "--h", "1e-12", "--t-end", "1", "--out", str(out)]) == EXIT_INPUT
+    assert "records of 1,000,000,000,000 steps" in capsys.readouterr().err
+    if existed:  # the user's folder stays, empty
+        assert out.is_dir() and not any(out.iterdir())
+    else:
+        assert not (tmp_path / "new").exists()
+
+
+def test_a_run_refused_by_its_first_step_claims_no_folder(tmp_path, capsys):
+    out = tmp_path / "box"
+    assert main(["run", "rigid_box", "--first-step-limit", "1e-300", "--out", str(out)]) == EXIT_INPUT
+    assert "is estimated at" in capsys.readouterr().err
+    assert not out.exists()
