@@ -5,7 +5,9 @@ return a :class:`~nsga_jax.Solution`. The whole trajectory runs in compiled
 loops over chunks of steps (one compilation, reused for every chunk); no Python
 runs inside a chunk. After each chunk the host adds the chunk to the run's
 statistics, keeps its records (every ``SaveAt.every``-th step of them), reports
-progress, writes the full chunk to ``SaveAt.chunks`` and hands it to an
+progress, gathers the kept records into few files in ``SaveAt.chunks``
+(:class:`~nsga_jax.chunks.RecordFiles`, written at the latest every few
+seconds and when the run stops or is interrupted), hands the full chunk to an
 optional callback, and stops early on a failure when ``throw=True``. With
 ``SaveAt(every=k > 1)`` the memory a run holds is one chunk plus the kept
 records: flat for any number of steps.
@@ -29,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .chunks import chunk_files, chunk_length, chunk_plan
+from .chunks import RecordFiles, chunk_length, chunk_plan
 from .compilation_cache import cache_events, compile_source
 from .diagnosis import FLOAT32_HINT, nonfinite_origin
 from .first_step import LIMIT_SECONDS, NOTE_SECONDS, check_first_step
@@ -129,10 +131,11 @@ def simulate(
         q0, v0: initial coordinates and velocities, shape (n,).
         saveat: what to keep (:class:`~nsga_jax.SaveAt`): ``every=k`` keeps
             the records of every k-th step (and of the last) in the solution,
-            while ``stats``, ``failed_steps``, ``chunks`` and ``on_chunk``
-            still see every step (memory stays flat for long runs);
-            ``chunks=folder`` writes every chunk of steps to that folder as it
-            finishes. ``SaveAt.fn`` is for :func:`~nsga_jax.integrate` and is
+            while ``stats``, ``failed_steps`` and ``on_chunk`` still see every
+            step (memory stays flat for long runs); ``chunks=folder`` writes
+            the kept records to that folder as the run goes (few files,
+            :class:`~nsga_jax.chunks.RecordFiles`; written at once on an
+            interruption). ``SaveAt.fn`` is for :func:`~nsga_jax.integrate` and is
             refused here.
         throw: stop at the first step that fails (Newton cap or NaN/inf) and
             raise :class:`ConvergenceError`; with ``False`` keep going and
@@ -200,11 +203,10 @@ def simulate(
                record_numbers=sum(packed_sizes(template)), enabled=check_memory)
     slow = check_first_step(model, scheme, dtype, limit=first_step_limit)
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
-    if saveat.chunks is not None:
-        on_chunk = chunk_files(saveat.chunks, then=on_chunk)
     run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),
                                     v0.astype(dtype), throw=throw, chunk_size=chunk_size, progress=progress,
                                     on_chunk=on_chunk, record_every=record_every, dtype=dtype,
+                                    files=None if saveat.chunks is None else RecordFiles(saveat.chunks),
                                     estimate=slow.describe() if slow.seconds > NOTE_SECONDS else None)
     frictional_restitution = (bool(model.n_friction) and bool(np.any(np.asarray(model.restitution) > 0))
                               and getattr(scheme, "impact_law", "newton") != "energetic")  # the option is in use
@@ -240,12 +242,14 @@ def _energy_of(model: Model):
     return _energies_jit if model.has_energy else None
 
 
-def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk,
-               record_every, dtype, estimate=None) -> tuple[dict[str, Any], RunTotals, ConvergenceError | None]:
+def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, progress, on_chunk, record_every,
+               dtype, files=None, estimate=None) -> tuple[dict[str, Any], RunTotals, ConvergenceError | None]:
     """The time loop of :func:`simulate` on validated arguments, in ``dtype``
     (that of the model, scheme, q0 and v0 it is given); returns the solution's pieces (the arguments of
     :func:`~nsga_jax.solution.host_solution`), the running totals and, when
-    ``throw`` and a step failed, the error to raise. ``estimate``: the first
+    ``throw`` and a step failed, the error to raise. ``files``: the
+    :class:`~nsga_jax.chunks.RecordFiles` the kept records go to, flushed
+    however the loop ends. ``estimate``: the first
     step's, shown while compiling, where it is long (the first chunk is then one step; later
     chunks hold the steps of about :data:`~nsga_jax.progress.EVERY_SECONDS`)."""
     length = chunk_size or chunk_length(model)
@@ -289,34 +293,40 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
         totals.start(*np.asarray(energy_of(model, *rows)[0], float))
     first_failure = None
     steps_done = 0
-    for k, (first, count) in enumerate(chunk_plan(n_steps, length, cap=shown.next_chunk)):
-        tw = time.perf_counter()
-        t_start = jnp.asarray(real(t0 + (first - 1) * h))
-        state, (packed, done) = run(model, scheme, ops, state, h_arr, t_start, jnp.asarray(count, jnp.int32), stop,
-                                    length)
-        jax.block_until_ready((state, packed, done))
-        wall += time.perf_counter() - tw
-        packed, done = jax.device_get((packed, done))
-        floats, ints = packed
-        full = unpack_outputs(floats, ints, template)
-        energies = None if energy_of is None else np.asarray(energy_of(model, full.q, full.v))[done]
-        out = jax.tree_util.tree_map(lambda x: x[done], full)
-        if on_chunk is not None:
-            on_chunk(k, out)
-        totals.add(out, first_step=first, energies=energies)
-        steps_done += len(out.t)
-        bad = np.nonzero(out.result != Result.successful)[0]
-        if first_failure is None and bad.size:
-            i = int(bad[0])
-            first_failure = (first + i, out, i)
-        halt = throw and first_failure is not None
-        last = halt or steps_done >= n_steps
-        kept, kept_numbers = _every(out, first, record_every, keep_last=last)
-        chunks.append(kept)
-        numbers.append(kept_numbers)
-        shown.chunk(steps_done, last)
-        if halt:
-            break
+    try:
+        for k, (first, count) in enumerate(chunk_plan(n_steps, length, cap=shown.next_chunk)):
+            tw = time.perf_counter()
+            t_start = jnp.asarray(real(t0 + (first - 1) * h))
+            state, (packed, done) = run(model, scheme, ops, state, h_arr, t_start, jnp.asarray(count, jnp.int32),
+                                        stop, length)
+            jax.block_until_ready((state, packed, done))
+            wall += time.perf_counter() - tw
+            packed, done = jax.device_get((packed, done))
+            floats, ints = packed
+            full = unpack_outputs(floats, ints, template)
+            energies = None if energy_of is None else np.asarray(energy_of(model, full.q, full.v))[done]
+            out = jax.tree_util.tree_map(lambda x: x[done], full)
+            if on_chunk is not None:
+                on_chunk(k, out)
+            totals.add(out, first_step=first, energies=energies)
+            steps_done += len(out.t)
+            bad = np.nonzero(out.result != Result.successful)[0]
+            if first_failure is None and bad.size:
+                i = int(bad[0])
+                first_failure = (first + i, out, i)
+            halt = throw and first_failure is not None
+            last = halt or steps_done >= n_steps
+            kept, kept_numbers = _every(out, first, record_every, keep_last=last)
+            chunks.append(kept)
+            numbers.append(kept_numbers)
+            if files is not None:
+                files.add(kept)
+            shown.chunk(steps_done, last)
+            if halt:
+                break
+    finally:
+        if files is not None:
+            files.flush()  # also on Ctrl-C: what was kept is on disk
 
     records = prepend_initial(model, chunks, t0, q0, v0)
     ts = t0 + h * np.concatenate([[0], *numbers]).astype(np.float64)

@@ -66,7 +66,7 @@ def _run(args) -> int:
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
               f"{setting}, {s['dtype']}{law}; output in {out}", file=sys.stderr)
     failure = None
-    saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # every step on disk as it finishes
+    saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # kept steps on disk as the run goes
     try:
         with one_line_warnings(RedundantConstraintsWarning, InvariantWarning):  # printed below, from sol.warnings
             sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, saveat=saveat,
@@ -78,9 +78,11 @@ def _run(args) -> int:
         release_run_folder(out, created)
         raise
     except KeyboardInterrupt:
-        kept = sorted((Path(out) / "partial").glob("chunk_*.npz"))
-        print(f"\ninterrupted: {len(kept)} finished chunk(s) of steps kept in {Path(out) / 'partial'} "
-              "(nsga_jax.chunks.load_chunks reads them)", file=sys.stderr)
+        from .chunks import kept_rows
+
+        every = "" if s["record_every"] == 1 else f" (one in every {s['record_every']})"
+        print(f"\ninterrupted: the records of {kept_rows(Path(out) / 'partial')} step(s){every} kept in "
+              f"{Path(out) / 'partial'} (nsga_jax.chunks.load_chunks reads them)", file=sys.stderr)
         return EXIT_INTERRUPTED
     info = summary(sol, scene.name, s["scheme"],
                    {"parameters": scene.parameters, "solver": scene.solver,

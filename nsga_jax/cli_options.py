@@ -75,8 +75,9 @@ def command_parser() -> argparse.ArgumentParser:
                           "--set bodies.ball.mass=2")
     run.add_argument("--dtype", choices=("float64", "float32"), help="floating-point precision (default float64)")
     run.add_argument("--record-every", type=int, metavar="K",
-                     help="keep every K-th step in memory and in trajectory.npz; every step still goes to "
-                          "DIR/steps/ and into the statistics (flat memory for long runs)")
+                     help="keep every K-th step (and the last) in memory, in DIR/partial/ while the run goes and "
+                          "in trajectory.npz; the statistics still cover every step (flat memory and small files "
+                          "for long runs)")
     run.add_argument("--no-throw", action="store_true",
                      help="keep going past an unconverged step and mark it in the results")
     run.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>, or nsga_out/<scene>_2, ... "

@@ -1,11 +1,12 @@
 """Writing a run to disk: trajectory (NPZ), summary (JSON), plots (PNG).
 
-While a run is going, each finished chunk of steps is written at once to
-``DIR/partial/chunk_XXXXX.npz``, so an interrupted run loses nothing already
-computed. At the end ``DIR/trajectory.npz`` holds the solution's records;
-when they keep every step the chunk files are deleted, else (``SaveAt(every=k
-> 1)``, the configuration's ``record_every``) they are kept in ``DIR/steps/`` as the full-resolution record
-(:func:`~nsga_jax.chunks.load_chunks` reads them back).
+While a run is going, its kept records (every ``record_every``-th step,
+``SaveAt(every=k)``) are written as they are computed to a few files
+``DIR/partial/chunk_XXXXX.npz`` (:class:`~nsga_jax.chunks.RecordFiles`), so
+an interrupted run loses nothing already computed
+(:func:`~nsga_jax.chunks.load_chunks` reads them back). At the end
+``DIR/trajectory.npz`` holds the same records and ``DIR/partial/`` is
+deleted.
 """
 
 from __future__ import annotations
@@ -58,13 +59,7 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any], *, plots: bool
         paths["observables_plot"] = plot_observables(sol, out_dir / "observables.png", scene, scheme=scheme)
     if plots:
         paths["iterations_plot"] = plot_iterations(sol, out_dir / "iterations.png", scene, scheme=scheme)
-    partial = out_dir / "partial"
-    if len(sol.ts) == sol.n_steps + 1:  # every step is in trajectory.npz
-        shutil.rmtree(partial, ignore_errors=True)
-    elif partial.exists():
-        shutil.rmtree(out_dir / "steps", ignore_errors=True)
-        partial.rename(out_dir / "steps")
-        paths["steps"] = out_dir / "steps"
+    shutil.rmtree(out_dir / "partial", ignore_errors=True)  # its records are all in trajectory.npz
     return paths
 
 

@@ -4,7 +4,7 @@
 One Module for every way of choosing the output (diffrax's ``SaveAt`` is the
 model): every k-th step (``every``), a function of each step's state and
 record instead of the full record (``fn``), and, for the host driver only,
-the folder each finished chunk of steps is written to (``chunks``).
+the folder the kept steps are written to as the run goes (``chunks``).
 """
 
 from __future__ import annotations
@@ -39,9 +39,11 @@ class SaveAt(eqx.Module):
             :class:`~nsga_jax.StepOutput` (``Solution.q`` and ``v`` are then
             empty, shape (0, n)): keep only what a loss needs under
             ``jax.grad``. Only :func:`~nsga_jax.integrate` honours it.
-        chunks: a folder into which :func:`~nsga_jax.simulate` writes each
-            finished chunk of steps, every step in full, as
-            ``chunk_XXXXX.npz`` (:func:`nsga_jax.chunks.load_chunks` reads them
+        chunks: a folder into which :func:`~nsga_jax.simulate` writes the
+            kept steps (those of ``every``) as the run goes, in a few files
+            ``chunk_XXXXX.npz`` (:class:`nsga_jax.chunks.RecordFiles`: at the
+            latest every 10 s, and at once when the run stops or is
+            interrupted; :func:`nsga_jax.chunks.load_chunks` reads them
             back), so an interrupted run loses nothing already computed. Only
             the host driver honours it.
 

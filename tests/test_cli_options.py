@@ -1,15 +1,20 @@
 """The command line's surface: help written for users, a help text for every
 option of every command, a quick default ``bench``, ``--no-plots``, refused
-runs that leave no folder behind."""
+runs that leave no folder behind, and ``--record-every`` thinning what an
+interrupted run writes."""
 
 from __future__ import annotations
 
 import argparse
+import json
 
+import numpy as np
 import pytest
 
 from nsga_jax import bench as bench_module
-from nsga_jax.cli import EXIT_INPUT, main
+from nsga_jax import progress
+from nsga_jax.chunks import load_chunks
+from nsga_jax.cli import EXIT_INPUT, EXIT_INTERRUPTED, main
 from nsga_jax.cli_options import BENCH_SCENES, command_parser
 
 
@@ -90,3 +95,34 @@ def test_a_run_refused_by_its_first_step_claims_no_folder(tmp_path, capsys):
     assert main(["run", "rigid_box", "--first-step-limit", "1e-300", "--out", str(out)]) == EXIT_INPUT
     assert "is estimated at" in capsys.readouterr().err
     assert not out.exists()
+
+
+def _interrupt_after(monkeypatch, chunks: int) -> None:
+    """Ctrl-C as the run reports its ``chunks``-th finished chunk."""
+    seen = []
+    original = progress.Progress.chunk
+
+    def chunk(self, steps_done: int, last: bool) -> None:
+        original(self, steps_done, last)
+        seen.append(steps_done)
+        if len(seen) == chunks:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(progress.Progress, "chunk", chunk)
+
+
+@pytest.mark.parametrize("k", [1, 10])
+def test_an_interrupted_run_writes_the_kept_steps_only_in_few_files(k, tmp_path, monkeypatch, capsys):
+    _interrupt_after(monkeypatch, 4)
+    out = tmp_path / f"every_{k}"
+    code = main(["run", "bouncing_ball", "--h", "1e-4", "--t-end", "100", "--chunk", "256", "--record-every", str(k),
+                 "--out", str(out), "--quiet"])
+    assert code == EXIT_INTERRUPTED
+    files = sorted((out / "partial").glob("chunk_*.npz"))
+    kept = load_chunks(out)
+    steps = np.arange(1, 4 * 256 + 1)
+    expected = steps[steps % k == 0]  # 1024 rows with every step, 102 with every 10th
+    np.testing.assert_allclose(kept["t"], expected * 1e-4, rtol=1e-12)
+    assert len(files) == 1  # four chunks, one file, written at the interruption
+    assert f"interrupted: the records of {len(expected)} step(s)" in capsys.readouterr().err
+    assert json.loads((out / "run.json").read_text())["solver"]["record_every"] == k

@@ -125,14 +125,17 @@ def test_each_entry_point_refuses_what_only_the_other_honours(tmp_path):
         nj.integrate(BALL, nj.DS(), 0.0, 0.1, 1e-3, jnp.ones(1), jnp.zeros(1), saveat=7)
 
 
-def test_saveat_chunks_writes_every_step_to_disk(tmp_path):
+def test_saveat_chunks_writes_the_kept_steps_to_disk_in_few_files(tmp_path):
     seen = []
     sol = nj.simulate(BALL, nj.DS(), 0.0, 0.5, 1e-3, [1.0], [0.0], chunk_size=64,
-                      saveat=nj.SaveAt(every=10, chunks=tmp_path / "steps"), on_chunk=lambda k, r: seen.append(k))
-    steps = load_chunks(tmp_path / "steps", ".")
-    assert steps["t"].shape == (500,) and sol.ts.shape == (51,)
-    assert seen == list(range(8))  # the callback still sees every chunk
-    np.testing.assert_array_equal(steps["q"][9::10], sol.q[1:])
+                      saveat=nj.SaveAt(every=10, chunks=tmp_path / "kept"),
+                      on_chunk=lambda k, r: seen.append(len(r.t)))
+    kept = load_chunks(tmp_path / "kept", ".")
+    assert kept["t"].shape == (50,) and sol.ts.shape == (51,)
+    assert len(list((tmp_path / "kept").glob("*.npz"))) == 1  # 8 chunks, gathered into one file
+    assert seen == [64] * 7 + [52]  # the callback still sees every step of every chunk
+    np.testing.assert_array_equal(kept["q"], sol.q[1:])
+    np.testing.assert_allclose(kept["t"], sol.ts[1:], rtol=1e-12)
 
 
 def test_simulate_batch_returns_one_solution_per_step_size():

@@ -110,8 +110,8 @@ SOLVER_PARAMS: dict[str, Param] = {
     "impact_law": Param("newton", "impact law with restitution: Newton's (newton) or, with friction, one that "
                         "cannot create energy (energetic; ds and dsn only; see docs/friction.md)", kind="choice",
                         choices=IMPACT_LAWS),
-    "record_every": Param(1, "keep every k-th step in memory and in trajectory.npz (statistics cover every "
-                          "step; the CLI writes every step to DIR/steps/ when k > 1)", kind="int", lo=1,
+    "record_every": Param(1, "keep every k-th step (and the last) in memory, on disk and in trajectory.npz; "
+                          "the statistics cover every step", kind="int", lo=1,
                           hi=1_000_000_000),
 }
 
