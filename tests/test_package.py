@@ -133,3 +133,11 @@ def test_the_wheel_holds_the_configs_examples_and_metadata(tmp_path):
         assert field in metadata, field
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert "# nsga_jax" in metadata  # README.md as the long description
+
+
+def test_the_system_files_page_lists_every_packaged_system_file():
+    page = (ROOT / "docs" / "system-files.md").read_text()
+    table = set(re.findall(r"^\| `(configs/systems/[\w.]+\.toml)` \|", page, re.M))
+    shipped = {name for name in packaged_files() if name.startswith("configs/systems/")}
+    assert table == shipped
+    assert f"{['', 'One', 'Two', 'Three', 'Four', 'Five', 'Six', 'Seven'][len(shipped)]} system files ship" in page
