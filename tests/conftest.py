@@ -27,11 +27,14 @@ def scene_registry():
     """The scenes a test registers (system files, scene files) stay out of the
     other tests' registry: it is restored after the test."""
     from nsga_jax.scenes import REGISTRY
+    from nsga_jax.scenes.base import _SCENE_FILES
 
-    before = dict(REGISTRY)
+    before, files = dict(REGISTRY), dict(_SCENE_FILES)
     yield REGISTRY
     REGISTRY.clear()
     REGISTRY.update(before)
+    _SCENE_FILES.clear()  # a scene file whose scenes left the registry is imported again when next named
+    _SCENE_FILES.update(files)
 
 
 @pytest.fixture
