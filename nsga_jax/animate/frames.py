@@ -2,7 +2,8 @@
 times, which contacts touch, the fixed planes spanned around what moves, and
 (optionally) the contact forces as arrows.
 
-A long run is subsampled to at most ``max_frames`` evenly spaced records;
+A long run is subsampled to at most ``max_frames`` evenly spaced records
+(records of failed steps that hold NaN are left out);
 what happens between two frames is not lost: a contact is shown touching,
 and its force arrow drawn with the largest force, if it touched at any step
 recorded since the previous frame (an impact lasts one step).
@@ -15,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..results import ConfigError
 from .drawing import Item, Layout, Plane
 from .run_folder import RecordedRun
 
@@ -88,13 +90,15 @@ def frame_rows(rows: int, max_frames: int) -> np.ndarray:
 
 
 def evaluate(functions: list[Any], q: np.ndarray) -> np.ndarray:
-    """The point functions at every row of ``q`` (F, n): (F, len(functions), 3), in one compiled call."""
+    """The point functions at every row of ``q`` (F, n): (F, len(functions), 3),
+    vectorised over the rows (``vmap``; not compiled as one program, whose
+    compilation would cost seconds for a mesh's hundreds of points)."""
     if not functions:
         return np.zeros((q.shape[0], 0, 3))
     import jax
     import jax.numpy as jnp
 
-    stacked = jax.jit(jax.vmap(lambda x: jnp.stack([fn(x) for fn in functions])))
+    stacked = jax.vmap(lambda x: jnp.stack([fn(x) for fn in functions]))
     return np.asarray(stacked(jnp.asarray(q)), float)
 
 
@@ -192,16 +196,20 @@ def animation_of(run: RecordedRun, *, max_frames: int = DEFAULT_MAX_FRAMES, forc
     from .parts import layout_of  # loads JAX
 
     layout = layout_of(run.model)
-    rows = frame_rows(len(run.times), max_frames)
+    finite = np.flatnonzero(np.all(np.isfinite(run.q), axis=1))  # a failed step's record may hold NaN
+    if finite.size == 0:
+        raise ConfigError(f"run folder {str(run.folder)!r}: no recorded step has finite coordinates; nothing to draw")
+    rows = finite[frame_rows(finite.size, max_frames)]
     moving = evaluate(layout.points, run.q[rows])
     normals = evaluate(layout.normals, run.q[rows])
     starts = window_starts(rows)
     end = int(rows[-1]) + 1
     nb = run.model.n_bilateral
     nu = run.gap.shape[1]
-    closest = np.minimum.reduceat(run.gap[:end], starts, axis=0) if nu else np.zeros((len(rows), 0))
-    pushes = np.maximum.reduceat(np.maximum(run.impulse[:end, nb:nb + nu], 0.0), starts, axis=0) if nu \
-        else np.zeros((len(rows), 0))
+    gaps = np.nan_to_num(run.gap[:end], nan=np.inf)  # a failed step's NaN: neither touching nor pushing
+    impulses = np.maximum(np.nan_to_num(run.impulse[:end, nb:nb + nu], nan=0.0, posinf=0.0), 0.0)
+    closest = np.minimum.reduceat(gaps, starts, axis=0) if nu else np.zeros((len(rows), 0))
+    pushes = np.maximum.reduceat(impulses, starts, axis=0) if nu else np.zeros((len(rows), 0))
     focus = _focus(layout, moving)
     size = drawing_size(focus)
     items = list(layout.items)
