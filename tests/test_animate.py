@@ -272,14 +272,22 @@ def test_a_page_title_cannot_close_the_data_script():
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
+def chromium(*arguments: str) -> str:
+    """Run headless Chromium (its console on stderr); returns stdout, after
+    checking that no script error reached the console."""
+    command = [str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+               "--enable-logging=stderr", "--v=0", *arguments]
+    done = subprocess.run(command, check=True, capture_output=True, text=True, timeout=120)
+    assert "Uncaught" not in done.stderr, done.stderr
+    return done.stdout
+
+
 def screenshot(html: Path, png: Path, frame: int) -> np.ndarray:
     """Chromium's picture (600, 800, 3) of the page at ``frame``."""
     from PIL import Image
 
-    command = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-               "--force-device-scale-factor=1", f"--screenshot={png}", "--window-size=800,600",
-               f"{html.resolve().as_uri()}#frame={frame}"]
-    subprocess.run(command, check=True, capture_output=True, timeout=120)
+    chromium("--force-device-scale-factor=1", f"--screenshot={png}", "--window-size=800,600",
+             f"{html.resolve().as_uri()}#frame={frame}")
     return np.asarray(Image.open(png).convert("RGB")).astype(int)
 
 
@@ -322,6 +330,24 @@ def test_the_page_draws_a_3d_solid_on_its_floor(tmp_path):
     assert blue.sum() > 2000 and 200 < xs.mean() < 600 and ys.mean() < 556
     floor = colour_mask(picture, STYLES["ground"].fill)
     assert floor.sum() > 20000 and np.nonzero(floor)[0].mean() > ys.mean()  # the floor below the cube
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium)")
+def test_the_page_plays_by_itself_and_opens_paused_where_asked(tmp_path):
+    import re
+
+    folder = fake_run(tmp_path / "run", "rigid_pendulum", rows=40, move={0: 0.001})
+    html = write_animation(folder, formats="html", fps=20)["html"].resolve().as_uri()
+
+    def state(dom: str) -> tuple[str, int]:
+        button = re.search(r'<button id="play"[^>]*>(\w+)</button>', dom)
+        shown = re.search(r'<span id="time">t = [0-9.]+ s +\((\d+)/40\)</span>', dom)
+        assert button and shown, dom[-600:]
+        return button.group(1), int(shown.group(1))
+
+    playing, frame = state(chromium("--virtual-time-budget=1000", "--dump-dom", html))
+    assert playing == "Pause" and 15 <= frame <= 25  # 20 frames per second for a second
+    assert state(chromium("--virtual-time-budget=1000", "--dump-dom", html + "#frame=7")) == ("Play", 8)
 
 
 # ------------------------------------------------------------- command
