@@ -4,7 +4,8 @@ frame slider and, for a 3D drawing, drag to turn the view (double-click:
 back to the first view). The page loads nothing: no script, style sheet,
 font or image from anywhere else.
 
-``page.html#frame=K`` opens the page paused at frame K.
+``page.html#frame=K`` opens the page paused at frame K; ``#view=A,E`` (3D)
+opens it seen from azimuth A and elevation E [degrees] (``#frame=K&view=A,E``: both).
 """
 
 from __future__ import annotations

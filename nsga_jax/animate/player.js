@@ -285,6 +285,11 @@
     });
   }
   window.addEventListener("resize", layout);
+  const turned = /view=(-?[\d.]+),(-?[\d.]+)/.exec(window.location.hash);  // azimuth, elevation [deg]
+  if (turned && data.dim === 3) {
+    view.azimuth = Number(turned[1]) * Math.PI / 180;
+    view.elevation = Math.max(-1.55, Math.min(1.55, Number(turned[2]) * Math.PI / 180));
+  }
   const start = /frame=(\d+)/.exec(window.location.hash);
   if (start) {
     frame = Math.min(frames - 1, Number(start[1]));
