@@ -322,7 +322,8 @@ def test_the_page_draws_the_block_where_the_view_puts_it(tmp_path):
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium)")
-def test_the_page_draws_a_3d_solid_on_its_floor_from_any_side(tmp_path):
+@pytest.mark.parametrize("turn", ["", "150,60"], ids=["first view", "turned"])
+def test_the_page_draws_a_3d_solid_on_its_floor_from_any_side(tmp_path, turn):
     """The cube above its floor, where the Python view puts it, in the first
     view and turned (``#view=``: what dragging does)."""
     import math
@@ -331,18 +332,17 @@ def test_the_page_draws_a_3d_solid_on_its_floor_from_any_side(tmp_path):
     paths = write_animation(folder, formats="html")
     animation = animation_of(load_run(folder))
     nodes = sorted({i for item in animation.items if item.kind == "solid" for i in item.points})
-    for turn in ("", "150,60"):
-        picture = screenshot(paths["html"], tmp_path / "shot.png", frame=2, view=turn)[:600 - CONTROLS_HEIGHT]
-        blue = (picture[..., 2] > picture[..., 0] + 60) & (picture[..., 2] > 120)  # the canvas: not the slider
-        ys, xs = np.nonzero(blue)
-        assert blue.sum() > 2000
-        angles = [math.radians(float(a)) for a in turn.split(",")] if turn else [View().azimuth, View().elevation]
-        view = View(800, 600 - CONTROLS_HEIGHT, *angles)
-        xy, _ = project(animation.moving[2, nodes], animation, view)
-        centre = fit(animation, view).pixels(xy).mean(axis=0)
-        assert abs(xs.mean() - centre[0]) < 4 and abs(ys.mean() - centre[1]) < 4, (turn, xs.mean(), ys.mean(), centre)
-        floor = colour_mask(picture, STYLES["ground"].fill)
-        assert floor.sum() > 20000 and np.nonzero(floor)[0].mean() > ys.mean()  # the floor below the cube
+    picture = screenshot(paths["html"], tmp_path / "shot.png", frame=2, view=turn)[:600 - CONTROLS_HEIGHT]
+    blue = (picture[..., 2] > picture[..., 0] + 60) & (picture[..., 2] > 120)  # the canvas: not the slider
+    ys, xs = np.nonzero(blue)
+    assert blue.sum() > 2000
+    angles = [math.radians(float(a)) for a in turn.split(",")] if turn else [View().azimuth, View().elevation]
+    view = View(800, 600 - CONTROLS_HEIGHT, *angles)
+    xy, _ = project(animation.moving[2, nodes], animation, view)
+    centre = fit(animation, view).pixels(xy).mean(axis=0)
+    assert abs(xs.mean() - centre[0]) < 4 and abs(ys.mean() - centre[1]) < 4, (turn, xs.mean(), ys.mean(), centre)
+    floor = colour_mask(picture, STYLES["ground"].fill)
+    assert floor.sum() > 20000 and np.nonzero(floor)[0].mean() > ys.mean()  # the floor below the cube
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on this machine (apt-get install chromium)")
