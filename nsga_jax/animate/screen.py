@@ -150,19 +150,24 @@ def shade(colour: str, factor: float) -> str:
     return "#" + "".join(f"{min(255, max(0, round(c * factor))):02x}" for c in rgb)
 
 
-def face_light(points: np.ndarray, animation: Animation, view: View) -> float:
-    """A 3D face's brightness factor, 0.55 ... 1: how squarely it faces a
-    light above and behind the viewer (Newell's normal of its points (k, 3))."""
+def light_direction(animation: Animation, view: View) -> np.ndarray:
+    """The unit direction (3,) towards the light: above and behind the viewer."""
+    right, screen_up, toward = camera(animation.up, view)
+    light = toward + 0.6 * screen_up + 0.3 * right
+    return light / np.linalg.norm(light)
+
+
+def face_light(points: np.ndarray, light: np.ndarray) -> float:
+    """A 3D face's brightness factor, 0.55 ... 1: how squarely it faces the
+    unit ``light`` (3,) (Newell's normal of its points (k, 3))."""
     nxt = np.roll(points, -1, axis=0)
     normal = np.array([np.sum((points[:, 1] - nxt[:, 1]) * (points[:, 2] + nxt[:, 2])),
                        np.sum((points[:, 2] - nxt[:, 2]) * (points[:, 0] + nxt[:, 0])),
                        np.sum((points[:, 0] - nxt[:, 0]) * (points[:, 1] + nxt[:, 1]))])
-    length = float(np.linalg.norm(normal))
+    length = float(np.sqrt(normal @ normal))
     if length == 0:
         return 1.0
-    right, screen_up, toward = camera(animation.up, view)
-    light = toward + 0.6 * screen_up + 0.3 * right
-    return 0.55 + 0.45 * abs(float(normal @ light)) / (length * float(np.linalg.norm(light)))
+    return 0.55 + 0.45 * abs(float(normal @ light)) / length
 
 
 def arrow_shapes(kind: str, style: Style, tail: np.ndarray, head: np.ndarray) -> list[Shape]:
@@ -202,6 +207,7 @@ def frame_shapes(animation: Animation, frame: int, view: View, fitted: Fit) -> l
     ``by_depth``, a 3D drawing from back to front), hidden items left out."""
     world = animation.frame_points(frame)
     xy, depth = project(world, animation, view)
+    light = light_direction(animation, view)
     px = fitted.pixels(xy)
     keyed: list[tuple[int, float, int, list[Shape]]] = []
     for index, item in enumerate(animation.items):
@@ -212,7 +218,7 @@ def frame_shapes(animation: Animation, frame: int, view: View, fitted: Fit) -> l
         fill = style.fill
         if item.shape == "polygon":
             if animation.dim == 3 and item.kind in ("body", "solid"):
-                fill = shade(fill, face_light(world[list(item.points)], animation, view))
+                fill = shade(fill, face_light(world[list(item.points)], light))
             shapes = [Shape(item.kind, "polygon", pts, fill, style.stroke, style.width)]
         elif item.shape == "dot":
             radius = item.radius * fitted.scale if item.radius > 0 else style.marker
