@@ -1,4 +1,4 @@
-"""Command-line interface: ``nsga-jax run | convergence | sweep | bench | identify | scenes | config``."""
+"""Command-line interface: ``nsga-jax run | animate | convergence | sweep | bench | identify | scenes | config``."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from .cli_config import config_command, scenes_command
+from .animate.command import animate_command, write_animation
 from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser, one_line_warnings, option_names, step_sizes  # noqa: F401  (options)
 from .results import ConfigError, ConvergenceError, InvariantError
 
@@ -88,6 +89,8 @@ def _run(args) -> int:
                    {"parameters": scene.parameters, "solver": scene.solver,
                     "error": str(failure) if failure else None})
     paths = write_run(sol, out, info, plots=not args.no_plots)
+    if args.animate:
+        paths.update(write_animation(out))
     st = sol.stats
     iterations = ", ".join(f"{name} {it['mean']:.2f}/{it['max']}" for name, it in st["iterations"].items()
                            if name != "linear_solves")
@@ -335,8 +338,8 @@ def _bench(args) -> int:
     return 0
 
 
-COMMANDS = {"run": _run, "convergence": _convergence, "identify": _identify, "sweep": _sweep, "bench": _bench,
-            "scenes": scenes_command, "config": config_command}
+COMMANDS = {"run": _run, "animate": animate_command, "convergence": _convergence, "identify": _identify,
+            "sweep": _sweep, "bench": _bench, "scenes": scenes_command, "config": config_command}
 
 
 def main(argv: list[str] | None = None) -> int:

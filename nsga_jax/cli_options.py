@@ -88,6 +88,8 @@ def command_parser() -> argparse.ArgumentParser:
                      help="fail (exit 1) when the energy rises at an impact past its tolerance (default: a warning)")
     run.add_argument("--chunk", type=int, default=None, help="steps per compiled chunk")
     run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.add_argument("--animate", action="store_true",
+                     help="also draw the run: DIR/animation.gif and DIR/animation.html (as `nsga-jax animate DIR`)")
     run.add_argument("--first-step-limit", type=float, default=60.0, metavar="S",
                      help="refuse a run whose first step is estimated above S seconds (dense iteration matrices "
                           "factorised: n^3 work; default 60); inf runs anyway")
@@ -175,6 +177,17 @@ def command_parser() -> argparse.ArgumentParser:
     bn.add_argument("--max-seconds", type=float, default=60.0,
                     help="skip a batch whose estimated run time exceeds this (default 60 s)")
     bn.add_argument("--out", type=Path, default=Path("nsga_out/bench"), help="output folder (bench.csv, bench.md)")
+
+    anim = sub.add_parser("animate", help="draw a finished run moving: OUT/animation.gif and a self-contained "
+                                          "OUT/animation.html that plays, pauses and scrubs")
+    anim.add_argument("folder", type=Path, metavar="OUT", help="the output folder of a finished `nsga-jax run`")
+    anim.add_argument("--format", choices=("gif", "html", "both"), default="both", help="what to write (default both)")
+    anim.add_argument("--forces", action="store_true", help="draw the contact forces as arrows (normal force, the "
+                                                            "largest since the previous frame)")
+    anim.add_argument("--fps", type=float, default=20.0, help="frames per second of the playback (default 20, "
+                                                              "at most 50)")
+    anim.add_argument("--max-frames", type=int, default=120,
+                      help="frames at most: a longer run is subsampled evenly (default 120)")
 
     sub.add_parser("scenes", help="list the built-in scenes and their parameters")
     cfg = sub.add_parser("config", help="print a config to save and edit: a scene's default config, or a "

@@ -19,8 +19,10 @@ from pathlib import Path
 
 from .results import ConfigError
 
-RUN_FILES = ("run.json", "summary.json", "trajectory.npz", "observables.png", "iterations.png", "partial", "steps")
-"""What a run writes into its folder (``run.json`` first, at the claim)."""
+RUN_FILES = ("run.json", "summary.json", "trajectory.npz", "observables.png", "iterations.png", "partial", "steps",
+             "animation.gif", "animation.html")
+"""What a run writes into its folder (``run.json`` first, at the claim), and
+its animation (``nsga-jax animate``)."""
 
 
 def writable_folder(path: Path, what: str = "output folder") -> Path:
@@ -47,7 +49,9 @@ def earlier_run_files(path: Path) -> list[str]:
 def claim_run_folder(path: Path, description: dict, *, overwrite: bool = False) -> Path:
     """Claim ``path`` for one run: refuse it when it holds an earlier run's
     files (unless ``overwrite``, which deletes them first), then write
-    ``run.json`` with ``description`` and the time of the claim."""
+    ``run.json`` with ``description``, the time of the claim and the folder
+    the command ran in (``cwd``: a relative scene path in ``description`` is
+    relative to it)."""
     path = writable_folder(path)
     found = earlier_run_files(path)
     if found and not overwrite:
@@ -57,7 +61,7 @@ def claim_run_folder(path: Path, description: dict, *, overwrite: bool = False) 
     for name in found:
         target = path / name
         shutil.rmtree(target) if target.is_dir() else target.unlink()
-    record = {**description, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid()}
+    record = {**description, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid(), "cwd": os.getcwd()}
     (path / "run.json").write_text(json.dumps(record, indent=2, default=str) + "\n")
     return path
 

@@ -21,7 +21,8 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("runs", {"saveat", "_integrate", "_simulate", "solution", "monitors", "diagnosis", "batch", "distributed",
               "run_inputs", "chunks", "memory", "progress", "first_step"}),
     ("application", {"scenes", "cli", "cli_options", "cli_config", "bench", "sweep", "grid", "identify", "fit_steps",
-                     "data", "studies", "output", "plotting", "sweep_plot", "folders", "tables", "metrics"}),
+                     "data", "studies", "output", "plotting", "sweep_plot", "folders", "tables", "metrics",
+                     "animate"}),
     ("package", {"__init__", "examples"}),  # examples/: a user's scene file, on the public API
 ]
 LEVEL = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}
