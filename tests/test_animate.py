@@ -27,7 +27,7 @@ from nsga_jax.scenes import REGISTRY, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 BUILT_IN = sorted(REGISTRY)
-SYSTEM_FILES = sorted((ROOT / "configs" / "systems").glob("*.toml"))
+SYSTEM_FILES = sorted((ROOT / "nsga_jax" / "configs" / "systems").glob("*.toml"))
 
 
 def fake_run(folder: Path, scene: str, overrides: dict | None = None, *, rows: int = 7,
