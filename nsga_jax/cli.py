@@ -7,8 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .cli_config import config_command, scenes_command
 from .animate.command import animate_command, write_animation
+from .cli_config import config_command, scenes_command
 from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser, one_line_warnings, option_names, step_sizes  # noqa: F401  (options)
 from .results import ConfigError, ConvergenceError, InvariantError
 
