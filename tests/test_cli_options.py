@@ -35,7 +35,7 @@ def test_top_level_help_speaks_to_users(capsys):
 def test_every_option_of_every_command_has_help():
     parser = command_parser()
     commands = _subparsers(parser)
-    assert set(commands) == {"run", "convergence", "identify", "sweep", "bench", "scenes", "config"}
+    assert set(commands) == {"run", "animate", "convergence", "identify", "sweep", "bench", "scenes", "config"}
     missing = []
     for name, sub in [("nsga-jax", parser), *commands.items()]:
         for action in sub._actions:

@@ -60,7 +60,9 @@ def _read_json(path: Path) -> dict[str, Any]:
 def scene_reference(record: dict[str, Any]) -> str:
     """The scene a run named (``run.json``'s ``scene``): a built-in name as
     it is, a relative file path joined to the folder the run was started in
-    (``cwd``), so that the run can be drawn from anywhere."""
+    (``cwd``), so that the run can be drawn from anywhere; a relative path
+    not found there, the packaged file it names (``configs/...``)."""
+    from ..packaged import packaged
     from ..scenes import REGISTRY
 
     scene = str(record["scene"])
@@ -70,7 +72,7 @@ def scene_reference(record: dict[str, Any]) -> str:
     file, colon, chosen = scene.partition(".py:")
     path = Path(file + ".py" if colon else file).expanduser()
     if not path.is_absolute():
-        path = Path(cwd) / path
+        path = Path(cwd) / path if (Path(cwd) / path).exists() else packaged(path) or Path(cwd) / path
     return str(path) + (f":{chosen}" if colon else "")
 
 
