@@ -76,16 +76,17 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
         fail("n_unilateral", f"restitution has shape {tuple(jnp.shape(model.restitution))}, expected ({nu},)")
     checked = ["sizes"]
 
+    @jax.jit
+    def evaluate(qs, vs):  # one compiled program for every sample: op by op, a system's jacfwd takes seconds
+        return (model.mass(qs), model.mass_product(qs, vs), -jax.jacfwd(model.force, argnums=0)(qs, vs, time),
+                -jax.jacfwd(model.force, argnums=1)(qs, vs, time), model.tangents(qs, vs, time),
+                model.constraint_jacobian(qs) if nb + nu else None)
+
     masses, stiffness, damping, jacobians = [], [], [], []
     for qs, vs in states:
-        M = model.mass(qs)
-        x = vs
-        if _differ(model.mass_product(qs, x), M @ x) > RELATIVE:
-            fail("mass_product", f"M(q) x differs from mass(q) @ x by {_differ(model.mass_product(qs, x), M @ x):.2e} "
-                                 "(relative)")
-        K = -jax.jacfwd(model.force, argnums=0)(qs, vs, time)
-        C = -jax.jacfwd(model.force, argnums=1)(qs, vs, time)
-        K_model, C_model = model.tangents(qs, vs, time)
+        M, product, K, C, (K_model, C_model), G = evaluate(qs, vs)
+        if _differ(product, M @ vs) > RELATIVE:
+            fail("mass_product", f"M(q) x differs from mass(q) @ x by {_differ(product, M @ vs):.2e} (relative)")
         if _differ(K_model, K) > 1e-6:
             fail("tangents", f"K differs from -d(force)/dq (jax.jacfwd) by {_differ(K_model, K):.2e} (relative)")
         if model.velocity_dependent_force and _differ(C_model, C) > 1e-6:
@@ -93,8 +94,8 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
         masses.append(M)
         stiffness.append(K)
         damping.append(C)
-        if nb + nu:
-            jacobians.append(model.constraint_jacobian(qs))
+        if G is not None:
+            jacobians.append(G)
     checked += ["mass_product", "tangents"]
 
     if not model.velocity_dependent_force:
