@@ -72,7 +72,8 @@ def scene_reference(record: dict[str, Any]) -> str:
     file, colon, chosen = scene.partition(".py:")
     path = Path(file + ".py" if colon else file).expanduser()
     if not path.is_absolute():
-        path = Path(cwd) / path if (Path(cwd) / path).exists() else packaged(path) or Path(cwd) / path
+        joined = Path(cwd) / path
+        path = joined if joined.exists() else packaged(path) or joined
     return str(path) + (f":{chosen}" if colon else "")
 
 
