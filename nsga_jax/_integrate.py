@@ -37,6 +37,7 @@ import numpy as np
 from jax import lax
 
 from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
+from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template
 from .memory import check_fits
@@ -105,6 +106,7 @@ def integrate(
     throw: bool = True,
     checkpoint_every: int | None = None,
     checkpoint_steps: bool | None = None,
+    first_step_limit: float | None = LIMIT_SECONDS,
 ) -> Solution:
     """Integrate ``model`` from t0 to t1 [s] with step h [s] by ``scheme``, as one pure JAX function.
 
@@ -134,6 +136,10 @@ def integrate(
         checkpoint_steps: checkpoint each step inside a chunk as well (see
             above; default: only where a chunk's dense residuals would pass
             256 MiB).
+        first_step_limit: refuse, before tracing the steps, a run on the
+            dense path whose first step is estimated above this many seconds
+            (60 by default; :func:`~nsga_jax.first_step.check_first_step`; one
+            run: a ``vmap``'s members are not seen); ``None`` runs anyway.
 
     Returns:
         A :class:`~nsga_jax.Solution` with JAX leaves: ``ts`` (rows,), ``q``,
@@ -158,6 +164,7 @@ def integrate(
     refuse_without_implicit_adjoint(scheme)
     dtype = jnp.result_type(*(jnp.asarray(x) for x in (q0, v0)), float)  # the precision of q0 and v0
     check_fits(model, scheme, dtype.itemsize)  # the dense matrices of one run (static sizes; a vmap's are not seen)
+    check_first_step(model, scheme, np.dtype(dtype).name, limit=first_step_limit)
     t0 = jnp.asarray(t0, dtype)
     h = jnp.asarray(h, dtype)
     q0 = jnp.asarray(q0, dtype)

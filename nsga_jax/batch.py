@@ -30,6 +30,7 @@ from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._simulate import chunk_length, prepare_and_init, prepend_initial
+from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
 from .integrators.linalg import bounded_lapack_batches
 from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
@@ -312,6 +313,7 @@ def simulate_batch(
     observables: Observables | None = None,
     dtype: str = "float64",
     mesh: Mesh | None = None,
+    first_step_limit: float | None = LIMIT_SECONDS,
 ) -> list[Solution]:
     """Integrate one problem with every step size in ``hs`` at once (``vmap``):
     the arguments of :func:`~nsga_jax.simulate` in the same order, with a
@@ -324,7 +326,11 @@ def simulate_batch(
     ``dtype`` is the precision, as in :func:`~nsga_jax.simulate`; ``mesh``
     splits the members over devices (:func:`member_mesh`; the number of step
     sizes must then be a multiple of the mesh size); ``observables`` names
-    quantities of each finished member, as in :func:`~nsga_jax.simulate`.
+    quantities of each finished member, as in :func:`~nsga_jax.simulate`;
+    ``first_step_limit`` [s] refuses, before compiling, a batch whose first
+    step (every member's dense factorisations, counted one after another) is
+    estimated above it (:func:`~nsga_jax.first_step.check_first_step`;
+    ``None`` runs anyway).
     """
     refuse_traced("nsga_jax.simulate_batch", model=model, scheme=scheme, t0=t0, t1=t1, hs=hs, q0=q0, v0=v0)
     check_scheme(scheme)
@@ -346,6 +352,7 @@ def simulate_batch(
     template = output_template(model, np.dtype(dtype), scheme.subproblems)
     check_fits(model, scheme, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
                record_numbers=sum(packed_sizes(template)), what="the batch")
+    check_first_step(model, scheme, dtype, limit=first_step_limit, members=len(hs), what="the batch")
     B = len(hs)
     model_c, scheme_c = cast_floats((model, scheme), dtype)
     run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),

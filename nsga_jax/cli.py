@@ -253,6 +253,7 @@ def _identify(args) -> int:
 
 
 def _sweep(args) -> int:
+    from .first_step import check_limit
     from .folders import writable_folder
     from .scenes import parse_override
     from .sweep import parse_grid, sweep
@@ -262,6 +263,7 @@ def _sweep(args) -> int:
                             ("--max-records", args.max_records, 1)):
         if value is not None:
             integer(name, value, lo)
+    check_limit("--first-step-limit", args.first_step_limit)
     grid = parse_grid(args.grid)
     hs = None if args.h is None else step_sizes(args.h)
     _use_cache(args)
@@ -285,7 +287,8 @@ def _sweep(args) -> int:
     try:
         result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
                        batch_size=args.batch_size, devices=devices, max_records=args.max_records,
-                       progress=not args.quiet, plots=not args.no_plots)
+                       progress=not args.quiet, plots=not args.no_plots,
+                       first_step_limit=None if args.first_step_limit == float("inf") else args.first_step_limit)
     except KeyboardInterrupt:
         kept = sorted((Path(out) / "batches").glob("batch_*.csv"))
         print(f"\ninterrupted: {len(kept)} finished batch(es) kept in {Path(out) / 'batches'}; the same command "

@@ -90,9 +90,7 @@ def command_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress output")
     run.add_argument("--animate", action="store_true",
                      help="also draw the run: DIR/animation.gif and DIR/animation.html (as `nsga-jax animate DIR`)")
-    run.add_argument("--first-step-limit", type=float, default=60.0, metavar="S",
-                     help="refuse a run whose first step is estimated above S seconds (dense iteration matrices "
-                          "factorised: n^3 work; default 60); inf runs anyway")
+    _first_step_limit(run, "a run")
 
     conv = sub.add_parser("convergence", help="error (eq. 52), iterations and run time against the step size",
                           parents=parents)
@@ -155,6 +153,7 @@ def command_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_sweep); "
                                              "run again to resume an interrupted sweep")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    _first_step_limit(sw, "a batch")
     hosts = sw.add_argument_group("several processes or hosts (jax.distributed; start the same command in each)")
     hosts.add_argument("--coordinator", metavar="HOST:PORT", help="address where process 0 listens")
     hosts.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
@@ -247,3 +246,9 @@ def option_names(option: str, text: str) -> list[str]:
     if not names:
         raise ConfigError(f"{option} expects comma-separated names, got {text!r}")
     return names
+
+
+def _first_step_limit(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument("--first-step-limit", type=float, default=60.0, metavar="S",
+                        help=f"refuse {what} whose first step is estimated above S seconds (dense iteration "
+                             "matrices factorised: n^3 work; default 60); inf runs anyway")

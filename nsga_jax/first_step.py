@@ -125,24 +125,27 @@ def lu_rate(dtype: str = "float64", size: int = PROBE_SIZE) -> float:
     import numpy as np
     from jax.scipy.linalg import lu_factor
 
-    a = jnp.asarray(np.eye(size) * size + np.random.default_rng(0).standard_normal((size, size)), dtype)
-    factor = jax.jit(lu_factor)
-    jax.block_until_ready(factor(a))
-    best = float("inf")
-    for _ in range(2):
-        started = time.perf_counter()
+    with jax.ensure_compile_time_eval():  # timed for real, also when asked inside a trace (integrate under jit)
+        a = jnp.asarray(np.eye(size) * size + np.random.default_rng(0).standard_normal((size, size)), dtype)
+        factor = jax.jit(lu_factor)
         jax.block_until_ready(factor(a))
-        best = min(best, time.perf_counter() - started)
+        best = float("inf")
+        for _ in range(2):
+            started = time.perf_counter()
+            jax.block_until_ready(factor(a))
+            best = min(best, time.perf_counter() - started)
     return 2.0 * size**3 / 3.0 / best
 
 
 def estimate_first_step(model: Model, scheme: AbstractScheme, dtype: str = "float64",
-                        rate: float | None = None) -> StepEstimate:
-    """The first step's factorisations and seconds; ``rate`` [operations/s]
-    defaults to :data:`LU_RATE`, or to :func:`lu_rate` measured on this
-    machine where the estimate at :data:`LU_RATE` passes 0.1 s."""
+                        rate: float | None = None, members: int = 1) -> StepEstimate:
+    """The first step's factorisations and seconds, of ``members`` runs
+    stepped together (a batch: one device factorises each member's
+    matrices); ``rate`` [operations/s] defaults to :data:`LU_RATE`, or to
+    :func:`lu_rate` measured on this machine where the estimate at
+    :data:`LU_RATE` passes 0.1 s."""
     n = model.n_dof
-    count = first_step_factorisations(model, scheme)
+    count = first_step_factorisations(model, scheme) * members
     flops = count * 2.0 * n**3 / 3.0
     measured = rate is None and flops / LU_RATE >= 0.1
     if rate is None:
@@ -158,22 +161,24 @@ def check_limit(name: str, limit: float | None) -> None:
 
 def check_first_step(model: Model, scheme: AbstractScheme, dtype: str = "float64", *,
                      limit: float | None = LIMIT_SECONDS, what: str = "the model",
-                     rate: float | None = None) -> StepEstimate:
-    """Refuse a run whose first step is estimated above ``limit`` seconds,
-    before anything is compiled (``limit=None``: never). Raises
-    :class:`~nsga_jax.ConfigError` naming the size, the scheme, the estimate
-    and what to do. Returns the estimate."""
+                     rate: float | None = None, members: int = 1) -> StepEstimate:
+    """Refuse a run (or ``members`` runs stepped together) whose first step
+    is estimated above ``limit`` seconds, before anything is compiled
+    (``limit=None``: never). Raises :class:`~nsga_jax.ConfigError` naming the
+    size, the scheme, the estimate and what to do. Returns the estimate."""
     check_limit("first_step_limit", limit)
-    est = estimate_first_step(model, scheme, dtype, rate)
+    est = estimate_first_step(model, scheme, dtype, rate, members)
     if limit is None or est.seconds <= limit:
         return est
     source = "measured here" if est.measured else "assumed"
     krylov = ("DS or DSn, which solve a matrix-free model this size without assembling (krylov_min_dof), or "
               if getattr(model, "matrix_free", False) else "")
+    runs = f" ({members} members stepped together)" if members > 1 else ""
+    fewer = "fewer members a batch (batch_size), " if members > 1 else ""
     raise ConfigError(
-        f"{what}: the first step of {type(scheme).__name__} on {est.n_dof:,} coordinates is estimated at "
+        f"{what}: the first step of {type(scheme).__name__} on {est.n_dof:,} coordinates{runs} is estimated at "
         f"{est.describe()} at {est.rate / 1e9:.3g} GFLOP/s ({source}); the limit is {limit:g} s; use "
-        f"{krylov}a smaller model (a coarser mesh, fewer divisions or elements); to run anyway, pass "
+        f"{fewer}{krylov}a smaller model (a coarser mesh, fewer divisions or elements); to run anyway, pass "
         f"first_step_limit=None (--first-step-limit inf)")
 
 

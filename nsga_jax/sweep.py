@@ -35,6 +35,7 @@ import numpy as np
 
 from .batch import BatchRun, member_mesh, member_solution, same_structure, stack_models
 from .distributed import agree
+from .first_step import LIMIT_SECONDS, check_first_step
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
 from .memory import check_fits
 from .metrics import l1_errors
@@ -188,6 +189,7 @@ def sweep(
     progress: bool = False,
     on_batch: Callable[[int, list[dict]], None] | None = None,
     plots: bool = True,
+    first_step_limit: float | None = LIMIT_SECONDS,
 ) -> SweepResult:
     """Run ``scene`` for every combination of the ``grid``'s values (and of ``hs``).
 
@@ -209,6 +211,10 @@ def sweep(
         progress: a progress bar over batches on stderr.
         on_batch: called as ``on_batch(k, rows)`` after batch k is written.
         plots: write ``sweep.png`` beside ``sweep.csv`` (with ``out``).
+        first_step_limit: refuse, before any batch is compiled, a sweep whose
+            batch's first step (its members' dense factorisations, counted one
+            after another) is estimated above this many seconds
+            (:func:`~nsga_jax.first_step.check_first_step`); ``None`` runs anyway.
     """
     if isinstance(max_records, bool) or not isinstance(max_records, (int, np.integer)) or max_records < 1:
         raise ConfigError(f"max_records must be an integer >= 1, got {max_records!r}")
@@ -232,6 +238,8 @@ def sweep(
         first = batch[0].scene
         check_fits(first.model, first.scheme(), np.dtype(first.solver["dtype"]).itemsize, members=per_device,
                    what=f"a batch of {first.name}")
+        check_first_step(first.model, first.scheme(), first.solver["dtype"], limit=first_step_limit,
+                         members=per_device, what=f"a batch of {first.name}")
 
     out_dir = None if out is None else Path(out)
     if out_dir is not None:

@@ -136,3 +136,46 @@ def test_the_command_line_refuses_in_one_line_and_runs_anyway_with_inf(tmp_path,
     assert re.match(r"error: flexible_cube: the first step of CS on 192 coordinates is estimated at", err[-1])
     with pytest.raises(AssertionError, match="compilation started"):
         main([*args, "--first-step-limit", "inf", "--overwrite"])
+
+
+def test_a_batch_counts_its_members_and_is_refused_by_name_before_compiling(small_cube):
+    cube = cube_of(small_cube, 12_288)
+    one = first_step.estimate_first_step(cube, DENSE, rate=RATE)
+    batch = first_step.estimate_first_step(cube, DENSE, rate=RATE, members=8)
+    assert batch.factorisations == 8 * one.factorisations and batch.seconds == pytest.approx(8 * one.seconds)
+    with pytest.raises(nj.ConfigError, match=r"^the batch: the first step of DS on 12,288 coordinates \(8 members "
+                                             r"stepped together\) is estimated at .* use fewer members a batch"):
+        first_step.check_first_step(cube, DENSE, rate=RATE, members=8, what="the batch")
+
+
+def test_every_entry_point_refuses_a_long_first_step_before_compiling(tmp_path, monkeypatch):
+    import jax
+
+    from nsga_jax.sweep import sweep
+
+    def nothing_compiles(*args, **kwargs):
+        raise AssertionError("compilation started before the first-step check")
+
+    monkeypatch.setattr(jax, "jit", nothing_compiles)
+    refused = r"the first step of DS on 1 coordinates .* the limit is 1e-15 s"
+    with pytest.raises(nj.ConfigError, match=r"^the batch: " + refused):
+        nj.simulate_batch(BALL, nj.DS(), 0.0, 0.01, [1e-3, 2e-3], [1.0], [0.0], first_step_limit=1e-15)
+    with pytest.raises(nj.ConfigError, match=r"^the model: " + refused):
+        nj.integrate(BALL, nj.DS(), 0.0, 0.01, 1e-3, jax.numpy.ones(1), jax.numpy.zeros(1), first_step_limit=1e-15)
+    with pytest.raises(nj.ConfigError, match=r"first_step_limit must be a positive number of seconds"):
+        nj.integrate(BALL, nj.DS(), 0.0, 0.01, 1e-3, jax.numpy.ones(1), jax.numpy.zeros(1), first_step_limit=0.0)
+    with pytest.raises(nj.ConfigError, match=r"^a batch of bouncing_ball: the first step of DS on 1 coordinates "
+                                             r"\(4 members stepped together\)"):
+        sweep("bouncing_ball", {"e": [0.5, 0.6, 0.7, 0.8]}, batch_size=4, first_step_limit=1e-15,
+                 out=tmp_path / "sweep", devices=jax.devices()[:1])
+    assert not (tmp_path / "sweep").exists()  # refused before the sweep claimed its folder
+
+
+def test_the_sweep_command_refuses_in_one_line(tmp_path, capsys):
+    code = main(["sweep", "bouncing_ball", "--grid", "e=0.5:0.6:2", "--first-step-limit", "1e-15", "--quiet",
+                 "--out", str(tmp_path / "s")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == EXIT_INPUT and "Traceback" not in "\n".join(err)
+    assert re.match(r"error: a batch of bouncing_ball: the first step of DS on 1 coordinates \(2 members", err[-1])
+    assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--first-step-limit", "-1", "--quiet"]) == EXIT_INPUT
+    assert "--first-step-limit must be a positive number of seconds" in capsys.readouterr().err
