@@ -255,10 +255,10 @@ def test_second_derivatives_against_finite_differences(system):
     q, v = random_state(model, seed=1)
     mu = jnp.asarray(np.random.default_rng(2).standard_normal(model.n_constraints))
     G = jax.jit(lambda x: model.constraint_jacobian(x))
-    np.testing.assert_allclose(jax.jit(lambda x, m: model.constraint_curvature(x, m))(q, mu), central_difference(lambda x: G(x).T @ mu, q),
-                               rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(jax.jit(lambda x, y: model.velocity_constraint_gradient(x, y))(q, v), central_difference(lambda x: G(x) @ v, q),
-                               rtol=1e-5, atol=1e-6)
+    curvature = jax.jit(lambda x, m: model.constraint_curvature(x, m))(q, mu)
+    np.testing.assert_allclose(curvature, central_difference(lambda x: G(x).T @ mu, q), rtol=1e-5, atol=1e-6)
+    velocity_gradient = jax.jit(lambda x, y: model.velocity_constraint_gradient(x, y))(q, v)
+    np.testing.assert_allclose(velocity_gradient, central_difference(lambda x: G(x) @ v, q), rtol=1e-5, atol=1e-6)
     nb = model.n_bilateral
     bilateral = jax.jit(lambda x, y: (model.velocity_constraint_gradient(x, y, bilateral_only=True),
                                       model.bilateral_jacobian(x)))
