@@ -9,6 +9,32 @@ from nsga_jax.compilation_cache import ENV
 
 jax.config.update("jax_enable_x64", True)
 
+QUICK_COMPILE = "--xla_backend_optimization_level=0"
+
+
+def pytest_configure(config):
+    """The default suite (``-m 'not slow'``) checks numbers, not speed: XLA's
+    CPU backend compiles its many small programs without LLVM's optimisation
+    passes (a quarter less time for the suite on 2 cores). Round-off may differ
+    in the last bits (no fused multiply-adds), so the slow suite (``-m slow``,
+    which CI also runs) keeps XLA's default, the programs users run. Set
+    before the first computation, for this process, its test processes and
+    the command-line runs it starts; a flag already in ``XLA_FLAGS`` wins."""
+    quick = config.getoption("markexpr", "") == "not slow"
+    if quick and "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {QUICK_COMPILE}".strip()
+
+
+MAX_WORKERS = 4
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto`` (the default, pyproject.toml): one test process per core, at
+    most :data:`MAX_WORKERS` (each holds its files' compiled programs); each
+    process runs whole files (``--dist loadfile``), so a file's module fixtures
+    compile once."""
+    return max(1, min(os.cpu_count() or 1, MAX_WORKERS))
+
 
 @pytest.fixture(autouse=True)
 def _seed():
@@ -158,6 +184,63 @@ LONG = {
     "test_double_pendulum.py::test_energy_never_grows_at_the_impact",
     "test_readme.py::test_example_runs_as_written[docs/newtons-cradle.md: In Python]",
     "test_readme.py::test_example_runs_as_written[docs/double-pendulum.md: In Python]",
+    # The default suite's 5-minute aim (2026-12-04, two test processes on 2 cores): tests of about
+    # 5 s or more there; their files keep quicker tests of the same features in the default run.
+    "test_stack.py::test_a_stack_stays_at_rest[2-3]",
+    "test_readme.py::test_example_runs_as_written[docs/python-api.md: Running a model: `integrate` and `simulate`]",
+    "test_system_parts.py::test_joints_hold_and_contacts_do_not_penetrate_through_a_run",
+    "test_redundant_constraints.py::test_pinned_twice_moves_as_pinned_once[ds]",
+    "test_redundant_constraints.py::test_the_command_line_prints_the_redundancy_once_in_its_own_words",
+    "test_readme.py::test_example_runs_as_written[docs/system-files.md: From Python]",
+    "test_fuzz.py::test_ctrl_c_stops_cleanly_and_says_what_was_kept",
+    "test_check_model.py::test_built_in_models_keep_their_declarations[box_stack]",
+    "test_check_model.py::test_built_in_models_keep_their_declarations[flexible_appendage]",
+    "test_check_model.py::test_built_in_models_keep_their_declarations[flexible_pendulum]",
+    "test_performance.py::test_no_recompilation_when_only_h_or_parameters_change",
+    "test_energetic_impact.py::test_equal_to_newtons_law_where_it_creates_no_energy[sliding_no_reversal]",
+    "test_energetic_impact.py::test_newtons_law_creates_energy_where_the_energetic_law_does_not",
+    "test_sweep.py::test_a_member_whose_exact_motion_is_zero_keeps_the_sweep_going",
+    "test_sweep.py::test_killed_sweep_resumes_to_the_same_table",
+    "test_krylov.py::test_cube_matches_the_dense_path_at_the_default_tolerance",
+    "test_krylov.py::test_no_n_by_n_array_is_formed",
+    "test_krylov.py::test_the_switch_follows_the_model_structure_and_size",
+    "test_krylov.py::test_closed_form_hex8_force_and_stiffness_equal_the_energy_derivatives",
+    "test_krylov.py::test_memory_estimate_of_the_matrix_free_path_is_linear",
+    "test_krylov.py::test_kronecker_mass_is_exact_and_preconditions_the_velocity_jump",
+    "test_own_model.py::test_rods_hold_at_position_and_velocity_level",
+    "test_fuzz.py::test_energy_created_at_an_impact_is_named_and_strict_fails",
+    "test_fuzz.py::test_float32_time_is_t0_plus_k_h_not_accumulated",
+    "test_fuzz.py::test_default_runs_keep_their_invariants[impacting_bar-overrides2]",
+    "test_fuzz.py::test_default_runs_keep_their_invariants[rigid_pendulum-overrides1]",
+    "test_friction.py::test_glancing_impact_of_two_discs[DS]",
+    "test_friction.py::test_2d_box_slides_stops_and_rests[DS]",
+    "test_friction.py::test_block_on_an_incline[CS-0.29-0.3-0.0]",
+    "test_friction.py::test_block_on_an_incline[DSn-0.29-0.3-0.0]",
+    "test_friction.py::test_3d_point_mass_keeps_its_sliding_direction[DS]",
+    "test_friction.py::test_oblique_impact_of_a_point_mass[3d-slip-DS]",
+    "test_friction.py::test_oblique_impact_of_a_point_mass[2d-slip-DS]",
+    "test_friction_scenes.py::test_incline_follows_the_exact_sliding_law[slides-down]",
+    "test_friction_scenes.py::test_spin_turns_into_horizontal_velocity_at_the_impact[30.0-False]",
+    "test_system_parts.py::test_derived_structure_is_what_the_functions_do",
+    "test_validation.py::test_model_fields_of_every_scene_are_checked",
+    "test_precision_and_records.py::test_float32_run_computes_in_float32_with_x64_on[impacting_bar]",
+    "test_precision_and_records.py::test_float32_run_computes_in_float32_with_x64_on[flexible_pendulum]",
+    "test_precision_and_records.py::test_float32_run_computes_in_float32_with_x64_on[flexible_cube]",
+    "test_system_flexible.py::test_rebuilt_scene_has_the_old_models_structure[flexible_cube]",
+    "test_system_files.py::test_cli_runs_a_system_file",
+    "test_readme.py::test_example_runs_as_written[docs/friction.md: Coulomb friction]",
+    "test_identify.py::test_a_fit_stopped_on_a_flat_bound_is_reported_as_failed",
+    "test_identify.py::test_ball_restitution_and_height_recovered[1% noise]",
+    "test_extreme.py::test_redundant_contacts_with_the_other_schemes[cs]",
+    "test_performance.py::test_record_template_matches_the_step[rigid_box-ds]",
+    "test_cli_options.py::test_no_plots_writes_the_data_and_no_png[identify]",
+    "test_studies.py::test_reference_run_and_grid_sampling",
+    "test_fuzz.py::test_default_runs_keep_their_invariants[rigid_box-overrides3]",
+    "test_energetic_impact.py::test_equal_to_newtons_law_where_it_creates_no_energy[sticking_e0]",
+    "test_schemes.py::test_cs_agrees_with_ds_at_small_step",
+    "test_impacting_bar.py::test_lumped_mass_variant_runs",
+    "test_krylov.py::test_projected_bordered_solve_equals_the_schur_complement",
+    "test_readme.py::test_example_runs_as_written[docs/systems.md: A first system]",
     "test_energetic_impact.py::test_the_share_is_differentiable",
     "test_energetic_impact.py::test_dsn_carries_the_law_and_gravity_leaves_the_steps_own_error",
 }

@@ -144,13 +144,17 @@ def test_3d_box_slides_stops_and_rests(scheme, direction):
     assert abs(errors[0]) <= DISTANCE_BOUND[scheme](2e-3) and abs(errors[1]) <= DISTANCE_BOUND[scheme](1e-3), errors
 
 
-MJ_FIRST_STEP = pytest.mark.xfail(strict=True, reason=(
-    "MJ's first step on the tilted floor finds the corners open (gaps a round-off above zero): at a = 0.35 "
-    "the block falls freely for a step, at a = 0.25 it presses on one corner only, rocks, penetrates by "
-    "1.7e-5 m and moves 1.6e-5 m before it settles; pressed in by 1e-12 m it starts as it should"))
+MJ_OPEN_CORNERS = ("MJ's first step on the tilted floor finds the corners open (gaps a round-off above zero): at "
+                   "a = 0.35 the block falls freely for a step, at a = 0.25 it presses on one corner only, rocks, "
+                   "penetrates by 1.7e-5 m and moves 1.6e-5 m before it settles; pressed in by 1e-12 m it starts "
+                   "as it should")
+MJ_FIRST_STEP = {0.35: pytest.mark.xfail(strict=True, reason=MJ_OPEN_CORNERS),
+                 0.25: pytest.mark.xfail(strict=False, reason=MJ_OPEN_CORNERS + " (at a = 0.25 the gaps' last bits "
+                                         "follow the compiler's rounding: compiled without LLVM's optimisations, as "
+                                         "in the default suite, they come out closed and the block rests)")}
 INCLINE = [("DS", 0.25, 0.3, 0.0), ("DS", 0.29, 0.3, 0.0), ("DS", 0.35, 0.3, 0.0), ("DS", 0.5, 0.3, 0.0),
            ("DSn", 0.29, 0.3, 0.0), ("CS", 0.29, 0.3, 0.0),
-           *(pytest.param("MJ", a, 0.3, 0.0, marks=MJ_FIRST_STEP) for a in (0.25, 0.35)),
+           *(pytest.param("MJ", a, 0.3, 0.0, marks=MJ_FIRST_STEP[a]) for a in (0.25, 0.35)),
            *(("MJ", a, 0.3, 1e-12) for a in (0.25, 0.29, 0.35, 0.5))]
 
 
