@@ -284,11 +284,14 @@ def _sweep(args) -> int:
     out = args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep"
     if jax.process_index() == 0:  # process 0 alone writes the sweep's files
         writable_folder(out)
+    from .models.redundancy import RedundantConstraintsWarning
+
     try:
-        result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
-                       batch_size=args.batch_size, devices=devices, max_records=args.max_records,
-                       progress=not args.quiet, plots=not args.no_plots,
-                       first_step_limit=None if args.first_step_limit == float("inf") else args.first_step_limit)
+        with one_line_warnings(RedundantConstraintsWarning):  # printed below, from result.warnings
+            result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
+                           batch_size=args.batch_size, devices=devices, max_records=args.max_records,
+                           progress=not args.quiet, plots=not args.no_plots,
+                           first_step_limit=None if args.first_step_limit == float("inf") else args.first_step_limit)
     except KeyboardInterrupt:
         kept = sorted((Path(out) / "batches").glob("batch_*.csv"))
         print(f"\ninterrupted: {len(kept)} finished batch(es) kept in {Path(out) / 'batches'}; the same command "
@@ -296,6 +299,8 @@ def _sweep(args) -> int:
         return EXIT_INTERRUPTED
     print(f"{len(result.rows)} runs on {len(devices)} device(s); compile {result.compile_time:.1f} s, "
           f"runs {result.wall_time:.2f} s (this session's batches)")
+    for warning in result.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     for row in result.failed:
         swept = ", ".join(f"{k}={row[k]:g}" for k in result.swept)
         print(f"warning: run {row['member']} ({swept}) failed at {row['failed_steps']} step(s): {row['result']}",

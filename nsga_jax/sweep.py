@@ -25,6 +25,7 @@ import json
 import math
 import sys
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,9 +40,11 @@ from .first_step import LIMIT_SECONDS, check_first_step
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
 from .memory import check_fits
 from .metrics import l1_errors
+from .models.redundancy import RedundantConstraintsWarning
 from .monitors import RunTotals
 from .precision import cast_floats
 from .results import ConfigError
+from .run_inputs import redundancy_notes
 from .scenes.base import configure
 from .solution import Solution, float64_view
 from .tables import read_csv, write_csv
@@ -80,6 +83,10 @@ class SweepResult:
     compile_time: float = 0.0
     wall_time: float = 0.0
     files: list[Path] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    """Notes on the members' models found before the sweep ran (redundant
+    bilateral constraints, :func:`~nsga_jax.run_inputs.redundancy_notes`),
+    each once; also warned."""
 
     def column(self, name: str) -> np.ndarray:
         return np.asarray([r[name] for r in self.rows])
@@ -234,17 +241,23 @@ def sweep(
     batches = split_batches(mems, batch_size)
     n_batches = len(batches)
     per_device = padded if devices[0].platform == "cpu" else padded // n_dev  # host devices share one memory
+    notes: list[str] = []
     for batch in batches:  # before any batch is compiled: each structure's dense matrices for a whole batch
         first = batch[0].scene
         check_fits(first.model, first.scheme(), np.dtype(first.solver["dtype"]).itemsize, members=per_device,
                    what=f"a batch of {first.name}")
         check_first_step(first.model, first.scheme(), first.solver["dtype"], limit=first_step_limit,
                          members=per_device, what=f"a batch of {first.name}")
+        with warnings.catch_warnings():  # warned below, each once
+            warnings.simplefilter("ignore", RedundantConstraintsWarning)
+            notes += [n for n in redundancy_notes(first.model, first.q0) if n not in notes]
+    for note in notes:  # before anything is compiled, as for simulate and simulate_batch
+        warnings.warn(note, RedundantConstraintsWarning, stacklevel=2)
 
     out_dir = None if out is None else Path(out)
     if out_dir is not None:
         _claim(out_dir, scene, grid, hs, overrides, batch_size, len(mems), max_records)
-    result = SweepResult(rows=[], swept=swept)
+    result = SweepResult(rows=[], swept=swept, warnings=notes)
     t_start = time.perf_counter()
     for k in range(n_batches):
         batch = batches[k]

@@ -17,6 +17,7 @@ import nsga_jax as nj
 from nsga_jax.integrators.model_terms import consistent_acceleration, multiplier_rtol
 from nsga_jax.models.redundancy import RedundantConstraintsWarning, bilateral_redundancy
 from nsga_jax.precision import cast_floats
+from nsga_jax.scenes import load_scene
 from nsga_jax.system import Distance, Pin, RigidBody2D, System, Weld
 
 T_END, H = 0.03, 1e-3
@@ -205,3 +206,24 @@ def test_the_command_line_prints_the_redundancy_once_in_its_own_words(tmp_path):
     lines = [line for line in proc.stderr.splitlines() if "redundant bilateral constraints" in line]
     assert len(lines) == 1 and lines[0].startswith("warning: redundant bilateral constraints: g_q^B(q0) has rank 2")
     assert "RedundantConstraintsWarning" not in proc.stderr
+
+
+def test_a_sweep_reports_the_redundancy_once_before_it_runs(tmp_path, monkeypatch, capsys, scene_registry):
+    """From Python: warned once and kept in ``SweepResult.warnings``; from the
+    command line: one ``warning:`` line, as for a run."""
+    from nsga_jax.cli import main
+    from nsga_jax.sweep import sweep
+
+    path = tmp_path / "twice.toml"
+    path.write_text(TWICE_PINNED)
+    scene = load_scene(str(path))
+    expected = bilateral_redundancy(scene.model, scene.q0).text()
+    with pytest.warns(RedundantConstraintsWarning) as caught:
+        result = sweep(str(path), {"bodies.link.mass": [1.0, 2.0, 3.0]}, batch_size=2)
+    assert [str(w.message) for w in caught if w.category is RedundantConstraintsWarning] == [expected]
+    assert result.warnings == [expected] and len(result.rows) == 3 and not result.failed
+    monkeypatch.chdir(tmp_path)
+    capsys.readouterr()
+    assert main(["sweep", str(path), "--grid", "bodies.link.mass=1:2:2", "--quiet", "--no-plots"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert [line for line in err if "redundant" in line] == [f"warning: {expected}"]
