@@ -328,8 +328,9 @@ def simulate_batch(
     sizes must then be a multiple of the mesh size); ``observables`` names
     quantities of each finished member, as in :func:`~nsga_jax.simulate`;
     ``first_step_limit`` [s] refuses, before compiling, a batch whose first
-    step (every member's dense factorisations, counted one after another) is
-    estimated above it (:func:`~nsga_jax.first_step.check_first_step`;
+    step (every member's dense factorisations, counted one after another;
+    a device's members where ``mesh`` splits them over GPUs) is estimated
+    above it (:func:`~nsga_jax.first_step.check_first_step`;
     ``None`` runs anyway).
     """
     refuse_traced("nsga_jax.simulate_batch", model=model, scheme=scheme, t0=t0, t1=t1, hs=hs, q0=q0, v0=v0)
@@ -352,7 +353,8 @@ def simulate_batch(
     template = output_template(model, np.dtype(dtype), scheme.subproblems)
     check_fits(model, scheme, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
                record_numbers=sum(packed_sizes(template)), what="the batch")
-    check_first_step(model, scheme, dtype, limit=first_step_limit, members=len(hs), what="the batch")
+    per_device = len(hs) if mesh is None or mesh.devices.flat[0].platform == "cpu" else len(hs) // mesh.size
+    check_first_step(model, scheme, dtype, limit=first_step_limit, members=per_device, what="the batch")
     B = len(hs)
     model_c, scheme_c = cast_floats((model, scheme), dtype)
     run = BatchRun(broadcast_members(model_c, B), scheme_c, t0, np.tile(q0.astype(dtype), (B, 1)),

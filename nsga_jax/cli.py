@@ -118,6 +118,7 @@ def _energy_text(energy: dict | None) -> str:
 
 
 def _convergence(args) -> int:
+    from .first_step import check_limit
     from .folders import writable_folder
     from .scenes import load_scene, parse_override
     from .validation import SCHEME_NAMES, real
@@ -135,6 +136,7 @@ def _convergence(args) -> int:
     hs = step_sizes(args.h)
     if args.ref_h is not None:
         real("--ref-h", args.ref_h, 0.0, lo_open=True, unit="s")
+    check_limit("--first-step-limit", args.first_step_limit)
     scene = load_scene(args.scene, overrides)  # validates everything before anything runs
     for h in hs:
         load_scene(args.scene, {**overrides, "h": h})
@@ -148,13 +150,15 @@ def _convergence(args) -> int:
     from .studies import make_reference, study, write_study
 
     if args.ref:
-        reference = make_reference(args.scene, overrides, "exact")
+        reference = make_reference(args.scene, overrides, "exact", first_step_limit=args.first_step_limit)
     else:
         if args.ref_h >= min(hs):
             raise ConfigError(f"--ref-h must be smaller than every step size, got {args.ref_h} >= {min(hs)}")
         print(f"reference: {args.ref_scheme.upper()} at h = {args.ref_h:g} s ...", file=sys.stderr)
-        reference = make_reference(args.scene, {**overrides, "scheme": args.ref_scheme}, args.ref_h)
-    rows = study(args.scene, schemes, hs, reference, overrides, observables, mode=args.mode)
+        reference = make_reference(args.scene, {**overrides, "scheme": args.ref_scheme}, args.ref_h,
+                                   first_step_limit=args.first_step_limit)
+    rows = study(args.scene, schemes, hs, reference, overrides, observables, mode=args.mode,
+                 first_step_limit=args.first_step_limit)
     paths = write_study(rows, out, scene.name, reference, plots=not args.no_plots)
     for r in rows:
         errs = ", ".join(f"{k} {e:.3e}" for k, e in r.errors.items())
@@ -180,10 +184,12 @@ def _assignments(items: list[str], option: str = "") -> dict:
 
 
 def _identify(args) -> int:
+    from .first_step import check_limit
     from .folders import writable_folder
     from .scenes import load_scene, parse_override
     from .validation import integer, real
 
+    check_limit("--first-step-limit", args.first_step_limit)
     overrides = dict(parse_override(s) for s in args.set)
     for key, value in (("h", args.h), ("t_end", args.t_end)):
         if value is not None:
@@ -236,7 +242,7 @@ def _identify(args) -> int:
     print(f"identifying {', '.join(names)} with {args.optimizer} ({args.adjoint} gradients) ...", file=sys.stderr)
     result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
                       progress=True, max_steps=args.max_steps, learning_rate=args.learning_rate, true=true,
-                      adjoint=adjoint_named(args.adjoint))
+                      adjoint=adjoint_named(args.adjoint), first_step_limit=args.first_step_limit)
     paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}", scene=scene,
                                  plots=not args.no_plots)
     for k in names:
@@ -284,10 +290,8 @@ def _sweep(args) -> int:
     out = args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep"
     if jax.process_index() == 0:  # process 0 alone writes the sweep's files
         writable_folder(out)
-    from .models.redundancy import RedundantConstraintsWarning
-
     try:
-        with one_line_warnings(RedundantConstraintsWarning):  # printed below, from result.warnings
+        with one_line_warnings():  # the redundancy report as one line, before the batches run
             result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
                            batch_size=args.batch_size, devices=devices, max_records=args.max_records,
                            progress=not args.quiet, plots=not args.no_plots,
@@ -299,8 +303,6 @@ def _sweep(args) -> int:
         return EXIT_INTERRUPTED
     print(f"{len(result.rows)} runs on {len(devices)} device(s); compile {result.compile_time:.1f} s, "
           f"runs {result.wall_time:.2f} s (this session's batches)")
-    for warning in result.warnings:
-        print(f"warning: {warning}", file=sys.stderr)
     for row in result.failed:
         swept = ", ".join(f"{k}={row[k]:g}" for k in result.swept)
         print(f"warning: run {row['member']} ({swept}) failed at {row['failed_steps']} step(s): {row['result']}",

@@ -108,6 +108,7 @@ def command_parser() -> argparse.ArgumentParser:
                       help="how the step sizes run: vmap over groups of similar step counts (default), one "
                            "padded vmap, or separate runs (see experiments/benchmarks/bench_batch_h.py)")
     conv.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_convergence)")
+    _first_step_limit(conv, "a run or batch of step sizes")
 
     ident = sub.add_parser("identify", help="fit scene parameters to measured (or synthetic) motion by "
                                             "gradient descent through the simulation", parents=parents)
@@ -137,6 +138,7 @@ def command_parser() -> argparse.ArgumentParser:
     ident.add_argument("--t-end", type=float, help="--synthetic: end time [s]")
     ident.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
     ident.add_argument("--out", type=Path, help="output folder (default: nsga_out/<scene>_identify)")
+    _first_step_limit(ident, "a model")
 
     sw = sub.add_parser("sweep", help="run a scene for every combination of parameter values and step sizes "
                                       "(batched, split over every device, resumable)", parents=parents)

@@ -26,6 +26,7 @@ run", ``experiments/tools/first_step.py``).
 from __future__ import annotations
 
 import functools
+import numbers
 import time
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -155,7 +156,11 @@ def estimate_first_step(model: Model, scheme: AbstractScheme, dtype: str = "floa
 
 def check_limit(name: str, limit: float | None) -> None:
     """Refuse a limit that is not a positive number of seconds (``inf`` and ``None``: no limit)."""
-    if limit is not None and not limit > 0:
+    if limit is None:
+        return
+    if isinstance(limit, bool) or not isinstance(limit, numbers.Real):
+        raise TypeError(f"{name} must be a number of seconds, inf or None, got {type(limit).__name__} {limit!r}")
+    if not limit > 0:
         raise ConfigError(f"{name} must be a positive number of seconds, inf or None, got {limit}")
 
 

@@ -26,6 +26,7 @@ import optax
 from ._integrate import integrate
 from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint
 from .data import Data
+from .first_step import LIMIT_SECONDS, check_limit
 from .fit_steps import (
     MAX_STEP,
     at_bounds,
@@ -117,9 +118,10 @@ NOISE_MARGIN = 1.5
 data to its noise (the mean square of n noisy samples scatters by sqrt(2/n)
 about σ², and the estimate of σ by a few per cent)."""
 
-def _run(build, scheme, h, n_steps, p, adjoint):
+def _run(build, scheme, h, n_steps, p, adjoint, first_step_limit=LIMIT_SECONDS):
     model, q0, v0, observables = build(p)
-    return observables(integrate(model, scheme, 0.0, n_steps * h, h, q0, v0, n_steps=n_steps, adjoint=adjoint))
+    return observables(integrate(model, scheme, 0.0, n_steps * h, h, q0, v0, n_steps=n_steps, adjoint=adjoint,
+                                 first_step_limit=first_step_limit))
 
 
 def synthetic_data(scene_name: str, overrides: dict | None, observables, noise: float = 0.0,
@@ -151,6 +153,7 @@ def identify(
     true: dict[str, float] | None = None,
     progress: bool = False,
     adjoint: AbstractAdjoint = DiscreteAdjoint(),
+    first_step_limit: float | None = LIMIT_SECONDS,
 ) -> Identification:
     """Fit the parameters ``names`` of a scene to ``data``.
 
@@ -176,6 +179,9 @@ def identify(
             fitted model did not make, both reach the same fits, the discrete
             one in 1.4 to 51 times fewer loss evaluations
             (``experiments/studies/identify_exact_data.py``, docs/gradients.md).
+        first_step_limit: refuse, before compiling, a model whose first step
+            is estimated above this many seconds (``integrate``'s; ``None``:
+            no limit).
 
     One function is compiled: the loss, its gradient (through the whole
     trajectory) and the predicted observables, together; every evaluation,
@@ -184,6 +190,7 @@ def identify(
     if optimizer not in OPTIMIZERS:
         raise ConfigError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got {optimizer!r}")
     integer("max_steps", max_steps, 1)
+    check_limit("first_step_limit", first_step_limit)
     require_instance("adjoint", adjoint, AbstractAdjoint, ADJOINT_KINDS)
     data.check()
     overrides = dict(overrides or {})
@@ -209,7 +216,7 @@ def identify(
     noise_floor = sum(weights[k] * noise[k] ** 2 for k in targets)
 
     def loss_and_prediction(u):
-        obs = _run(build, scheme, h, n_steps, {k: u[k] * scale[k] for k in names}, adjoint)
+        obs = _run(build, scheme, h, n_steps, {k: u[k] * scale[k] for k in names}, adjoint, first_step_limit)
         pred = {k: jnp.interp(t_data, ts, obs[k]) for k in targets}
         loss = sum(weights[k] * jnp.mean((pred[k] - targets[k]) ** 2) for k in targets)
         return loss, pred

@@ -21,6 +21,7 @@ import numpy as np
 from . import plotting
 from ._simulate import simulate
 from .batch import simulate_batch
+from .first_step import LIMIT_SECONDS
 from .metrics import observed_order, relative_l1_error
 from .results import ConfigError
 from .saveat import SaveAt
@@ -32,7 +33,8 @@ from .validation import step_count
 MODES = ("grouped", "padded", "separate")
 
 
-def run_step_sizes(scene: Scene, hs, mode: str = "grouped", group_ratio: float = 1.5) -> list[Solution]:
+def run_step_sizes(scene: Scene, hs, mode: str = "grouped", group_ratio: float = 1.5,
+                   first_step_limit: float | None = LIMIT_SECONDS) -> list[Solution]:
     """Run ``scene`` (its scheme and settings) at every step size in ``hs``.
 
     Modes: ``"separate"`` -- one compiled run per h (each with its own timing);
@@ -64,10 +66,12 @@ def run_step_sizes(scene: Scene, hs, mode: str = "grouped", group_ratio: float =
         if len(group) == 1:
             i = group[0]
             out[i] = simulate(scene.model, scheme, 0.0, T, hs[i], scene.q0, scene.v0, throw=False,
-                              observables=scene.observables, dtype=scene.solver["dtype"])
+                              observables=scene.observables, dtype=scene.solver["dtype"],
+                              first_step_limit=first_step_limit)
         else:
             sols = simulate_batch(scene.model, scheme, 0.0, T, [hs[i] for i in group], scene.q0, scene.v0,
-                                  observables=scene.observables, dtype=scene.solver["dtype"])
+                                  observables=scene.observables, dtype=scene.solver["dtype"],
+                                  first_step_limit=first_step_limit)
             for i, sol in zip(group, sols):
                 out[i] = sol
     return out  # type: ignore[return-value]
@@ -99,7 +103,8 @@ class Reference:
         return out
 
 
-def make_reference(scene_name: str, overrides: dict, ref: str | float) -> Reference:
+def make_reference(scene_name: str, overrides: dict, ref: str | float,
+                   first_step_limit: float | None = LIMIT_SECONDS) -> Reference:
     """``ref="exact"`` (the scene's exact solution) or a step size: a run of the
     scene with ``overrides`` (which fix its scheme) at that step."""
     if ref == "exact":
@@ -110,7 +115,8 @@ def make_reference(scene_name: str, overrides: dict, ref: str | float) -> Refere
     h_ref = float(ref)
     scene = load_scene(scene_name, {**overrides, "h": h_ref})
     t = time.perf_counter()
-    sol = scene.run(throw=False, progress=False, saveat=SaveAt(), dtype="float64")  # every step, in full precision
+    sol = scene.run(throw=False, progress=False, saveat=SaveAt(), dtype="float64",  # every step, in full precision
+                    first_step_limit=first_step_limit)
     wall = time.perf_counter() - t
     if sol.stats["failed_steps"]:
         raise ConfigError(f"the reference run ({scene.solver['scheme']}, h = {h_ref:g}) has failed steps; "
@@ -158,7 +164,8 @@ class StudyRow:
 
 
 def study(scene_name: str, schemes, hs, reference: Reference, overrides: dict | None = None,
-          observables=None, mode: str = "grouped") -> list[StudyRow]:
+          observables=None, mode: str = "grouped",
+          first_step_limit: float | None = LIMIT_SECONDS) -> list[StudyRow]:
     """Run ``scene_name`` with each scheme at each h; errors (eq. 52) against ``reference``.
 
     With a batched ``mode``, runs that shared a ``vmap`` report the batch's wall
@@ -167,7 +174,8 @@ def study(scene_name: str, schemes, hs, reference: Reference, overrides: dict | 
 
     A run that fails is kept: its errors are computed over the steps before
     its first failure only if it has none (else they are NaN), and the row
-    records the failure.
+    records the failure. ``first_step_limit`` [s] is each run's and batch's
+    (:func:`~nsga_jax.first_step.check_first_step`; ``None``: no limit).
     """
     overrides = dict(overrides or {})
     base = load_scene(scene_name, overrides)
@@ -176,7 +184,7 @@ def study(scene_name: str, schemes, hs, reference: Reference, overrides: dict | 
     for scheme in schemes:
         scene = load_scene(scene_name, {**overrides, "scheme": scheme})
         names = list(observables or scene.spec.error_observables)
-        sols = run_step_sizes(scene, hs, mode=mode)
+        sols = run_step_sizes(scene, hs, mode=mode, first_step_limit=first_step_limit)
         for sol in sols:
             st = sol.stats
             failed = sol.failed_steps

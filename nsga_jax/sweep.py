@@ -246,8 +246,15 @@ def sweep(
         first = batch[0].scene
         check_fits(first.model, first.scheme(), np.dtype(first.solver["dtype"]).itemsize, members=per_device,
                    what=f"a batch of {first.name}")
-        check_first_step(first.model, first.scheme(), first.solver["dtype"], limit=first_step_limit,
-                         members=per_device, what=f"a batch of {first.name}")
+        try:  # each process times its own LU rate: process 0 decides, so that none waits for another forever
+            check_first_step(first.model, first.scheme(), first.solver["dtype"], limit=first_step_limit,
+                             members=per_device, what=f"a batch of {first.name}")
+            refused = None
+        except ConfigError as error:
+            refused = error
+        if agree(refused is not None):
+            raise refused or ConfigError(f"a batch of {first.name}: process 0 refused its first step "
+                                         "(first_step_limit); its error names the estimate")
         with warnings.catch_warnings():  # warned below, each once
             warnings.simplefilter("ignore", RedundantConstraintsWarning)
             notes += [n for n in redundancy_notes(first.model, first.q0) if n not in notes]

@@ -179,3 +179,22 @@ def test_the_sweep_command_refuses_in_one_line(tmp_path, capsys):
     assert re.match(r"error: a batch of bouncing_ball: the first step of DS on 1 coordinates \(2 members", err[-1])
     assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--first-step-limit", "-1", "--quiet"]) == EXIT_INPUT
     assert "--first-step-limit must be a positive number of seconds" in capsys.readouterr().err
+
+
+def test_studies_and_identification_take_the_limit(tmp_path, capsys, no_compilation):
+    from nsga_jax.studies import make_reference, study
+
+    reference = make_reference("bouncing_ball", {}, "exact")
+    with pytest.raises(nj.ConfigError, match=r"^the batch: the first step of DS on 1 coordinates \(2 members"):
+        study("bouncing_ball", ["ds"], [1e-3, 9e-4], reference, {"t_end": 0.01}, first_step_limit=1e-15)
+    with pytest.raises(nj.ConfigError, match=r"^the model: the first step of DS on 1 coordinates"):
+        study("bouncing_ball", ["ds"], [1e-3], reference, {"t_end": 0.01}, first_step_limit=1e-15)
+    with pytest.raises(nj.ConfigError, match=r"^bouncing_ball: the first step of DS"):
+        make_reference("bouncing_ball", {"t_end": 0.01}, 1e-4, first_step_limit=1e-15)
+    with pytest.raises(TypeError, match=r"first_step_limit must be a number of seconds, inf or None, got str"):
+        nj.simulate_batch(BALL, nj.DS(), 0.0, 0.01, [1e-3], [1.0], [0.0], first_step_limit="60")
+    code = main(["convergence", "bouncing_ball", "--ref", "exact", "--h", "1e-3,9e-4", "--t-end", "0.01",
+                 "--first-step-limit", "1e-15", "--out", str(tmp_path / "c")])
+    assert code == EXIT_INPUT and re.search(r"error: the batch: the first step of DS", capsys.readouterr().err)
+    assert main(["identify", "bouncing_ball", "--params", "e", "--synthetic", "--first-step-limit", "0"]) == EXIT_INPUT
+    assert "--first-step-limit must be a positive number of seconds" in capsys.readouterr().err
