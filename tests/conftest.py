@@ -29,11 +29,14 @@ MAX_WORKERS = 4
 
 
 def pytest_xdist_auto_num_workers(config):
-    """``-n auto`` (the default, pyproject.toml): one test process per core, at
-    most :data:`MAX_WORKERS` (each holds its files' compiled programs); each
+    """``-n auto`` (the default, pyproject.toml): one test process per core this
+    process may use, at most :data:`MAX_WORKERS` (``PYTEST_XDIST_AUTO_NUM_WORKERS``
+    overrides) (each holds its files' compiled programs); each
     process runs whole files (``--dist loadfile``), so a file's module fixtures
     compile once."""
-    return max(1, min(os.cpu_count() or 1, MAX_WORKERS))
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
+    return max(1, min(len(os.sched_getaffinity(0)), MAX_WORKERS))
 
 
 @pytest.fixture(autouse=True)
