@@ -25,7 +25,6 @@ import json
 import math
 import sys
 import time
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,17 +35,15 @@ import numpy as np
 
 from .batch import BatchRun, member_mesh, member_solution, same_structure, stack_models
 from .distributed import agree
-from .first_step import LIMIT_SECONDS, check_first_step
+from .first_step import LIMIT_SECONDS
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
-from .memory import check_fits
 from .metrics import l1_errors
-from .models.redundancy import RedundantConstraintsWarning
 from .monitors import RunTotals
 from .precision import cast_floats
 from .results import ConfigError
-from .run_inputs import redundancy_notes
 from .scenes.base import configure
 from .solution import Solution, float64_view
+from .sweep_checks import check_batches
 from .tables import read_csv, write_csv
 from .validation import step_count
 
@@ -241,25 +238,7 @@ def sweep(
     batches = split_batches(mems, batch_size)
     n_batches = len(batches)
     per_device = padded if devices[0].platform == "cpu" else padded // n_dev  # host devices share one memory
-    notes: list[str] = []
-    for batch in batches:  # before any batch is compiled: each structure's dense matrices for a whole batch
-        first = batch[0].scene
-        check_fits(first.model, first.scheme(), np.dtype(first.solver["dtype"]).itemsize, members=per_device,
-                   what=f"a batch of {first.name}")
-        try:  # each process times its own LU rate: process 0 decides, so that none waits for another forever
-            check_first_step(first.model, first.scheme(), first.solver["dtype"], limit=first_step_limit,
-                             members=per_device, what=f"a batch of {first.name}")
-            refused = None
-        except ConfigError as error:
-            refused = error
-        if agree(refused is not None):
-            raise refused or ConfigError(f"a batch of {first.name}: process 0 refused its first step "
-                                         "(first_step_limit); its error names the estimate")
-        with warnings.catch_warnings():  # warned below, each once
-            warnings.simplefilter("ignore", RedundantConstraintsWarning)
-            notes += [n for n in redundancy_notes(first.model, first.q0) if n not in notes]
-    for note in notes:  # before anything is compiled, as for simulate and simulate_batch
-        warnings.warn(note, RedundantConstraintsWarning, stacklevel=2)
+    notes = check_batches(batches, per_device, first_step_limit)  # before any batch is compiled
 
     out_dir = None if out is None else Path(out)
     if out_dir is not None:
