@@ -119,7 +119,7 @@ def _energy_text(energy: dict | None) -> str:
 
 def _convergence(args) -> int:
     from .first_step import check_limit
-    from .folders import writable_folder
+    from .folders import refusable_folder
     from .scenes import load_scene, parse_override
     from .validation import SCHEME_NAMES, real
 
@@ -145,29 +145,29 @@ def _convergence(args) -> int:
     unknown = [k for k in observables if k not in scene.spec.observables]
     if unknown:
         raise ConfigError(f"unknown observable {unknown[0]!r}; {scene.name} has {', '.join(scene.spec.observables)}")
-    out = writable_folder(args.out or Path("nsga_out") / f"{scene.name}_convergence")
-    _use_cache(args)
-    from .studies import make_reference, study, write_study
+    with refusable_folder(args.out or Path("nsga_out") / f"{scene.name}_convergence") as out:
+        _use_cache(args)
+        from .studies import make_reference, study, write_study
 
-    if args.ref:
-        reference = make_reference(args.scene, overrides, "exact", first_step_limit=args.first_step_limit)
-    else:
-        if args.ref_h >= min(hs):
-            raise ConfigError(f"--ref-h must be smaller than every step size, got {args.ref_h} >= {min(hs)}")
-        print(f"reference: {args.ref_scheme.upper()} at h = {args.ref_h:g} s ...", file=sys.stderr)
-        reference = make_reference(args.scene, {**overrides, "scheme": args.ref_scheme}, args.ref_h,
-                                   first_step_limit=args.first_step_limit)
-    rows = study(args.scene, schemes, hs, reference, overrides, observables, mode=args.mode,
-                 first_step_limit=args.first_step_limit)
-    paths = write_study(rows, out, scene.name, reference, plots=not args.no_plots)
-    for r in rows:
-        errs = ", ".join(f"{k} {e:.3e}" for k, e in r.errors.items())
-        it = r.iterations["linear_solves"]
-        fail = f", {r.failed_steps} failed steps ({r.result})" if r.failed_steps else ""
-        print(f"{r.scheme:>3} h = {r.h:<8g} {errs}; solves/step {it['mean']:.2f} (max {it['max']}); "
-              f"{r.wall_time_s:.3f} s{fail}")
-    print("wrote " + ", ".join(str(p) for p in paths.values()))
-    return 0
+        if args.ref:
+            reference = make_reference(args.scene, overrides, "exact", first_step_limit=args.first_step_limit)
+        else:
+            if args.ref_h >= min(hs):
+                raise ConfigError(f"--ref-h must be smaller than every step size, got {args.ref_h} >= {min(hs)}")
+            print(f"reference: {args.ref_scheme.upper()} at h = {args.ref_h:g} s ...", file=sys.stderr)
+            reference = make_reference(args.scene, {**overrides, "scheme": args.ref_scheme}, args.ref_h,
+                                       first_step_limit=args.first_step_limit)
+        rows = study(args.scene, schemes, hs, reference, overrides, observables, mode=args.mode,
+                     first_step_limit=args.first_step_limit)
+        paths = write_study(rows, out, scene.name, reference, plots=not args.no_plots)
+        for r in rows:
+            errs = ", ".join(f"{k} {e:.3e}" for k, e in r.errors.items())
+            it = r.iterations["linear_solves"]
+            fail = f", {r.failed_steps} failed steps ({r.result})" if r.failed_steps else ""
+            print(f"{r.scheme:>3} h = {r.h:<8g} {errs}; solves/step {it['mean']:.2f} (max {it['max']}); "
+                  f"{r.wall_time_s:.3f} s{fail}")
+        print("wrote " + ", ".join(str(p) for p in paths.values()))
+        return 0
 
 
 def _assignments(items: list[str], option: str = "") -> dict:
@@ -185,7 +185,7 @@ def _assignments(items: list[str], option: str = "") -> dict:
 
 def _identify(args) -> int:
     from .first_step import check_limit
-    from .folders import writable_folder
+    from .folders import refusable_folder
     from .scenes import load_scene, parse_override
     from .validation import integer, real
 
@@ -219,48 +219,50 @@ def _identify(args) -> int:
         if unknown:
             raise ConfigError(f"--observables: unknown observable {unknown[0]!r}; {scene.name} has "
                               f"{', '.join(scene.spec.observables)}")
-    out = writable_folder(args.out or Path("nsga_out") / f"{scene.name}_identify")
-    _use_cache(args)
-    from .adjoint import adjoint_named
-    from .identify import Data, identify, synthetic_data, write_identification
+    with refusable_folder(args.out or Path("nsga_out") / f"{scene.name}_identify") as out:
+        _use_cache(args)
+        from .adjoint import adjoint_named
+        from .identify import Data, identify, synthetic_data, write_identification
 
-    if args.synthetic:
-        observables = (option_names("--observables", args.observables) if args.observables is not None
-                       else [scene.spec.observables[0]])
-        true = {k: scene.parameters[k] for k in names}
-        print(f"synthetic data: {scene.name} with {true}, noise {args.noise:g}", file=sys.stderr)
-        data = synthetic_data(args.scene, {**overrides, **true}, observables, noise=args.noise,
-                              seed=args.seed, every=args.every)
-        out.mkdir(parents=True, exist_ok=True)
-        data.save(out / "data.csv")
-    else:
-        if args.observables or args.noise or args.every != 1 or args.t_end is not None:
-            raise ConfigError("--observables, --noise, --every and --t-end apply to --synthetic only "
-                              "(with --data the file's columns and times are used)")
-        data = Data.load(args.data)
-        true = None
-    print(f"identifying {', '.join(names)} with {args.optimizer} ({args.adjoint} gradients) ...", file=sys.stderr)
-    result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
-                      progress=True, max_steps=args.max_steps, learning_rate=args.learning_rate, true=true,
-                      adjoint=adjoint_named(args.adjoint), first_step_limit=args.first_step_limit)
-    paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}", scene=scene,
-                                 plots=not args.no_plots)
-    for k in names:
-        line = f"{k}: initial {result.initial[k]:.6g} -> recovered {result.recovered[k]:.6g}"
-        if true is not None:
-            line += f" (true {true[k]:.6g}, relative error {result.summary()['relative_error'][k]:.2e})"
-        print(line)
-    print(f"{result.iterations} iterations, loss {result.losses[0]:.3e} -> {result.losses[-1]:.3e}, "
-          f"{result.wall_time_s:.2f} s (compile {result.compile_time_s:.1f} s)")
-    print("wrote " + ", ".join(str(p) for p in paths.values()))
-    verdict = "converged" if result.converged else "error: the fit did not converge"
-    print(f"{verdict}: {result.stop_message}", file=sys.stdout if result.converged else sys.stderr)
-    return 0 if result.converged else EXIT_FAILED
+        if args.synthetic:
+            observables = (option_names("--observables", args.observables) if args.observables is not None
+                           else [scene.spec.observables[0]])
+            true = {k: scene.parameters[k] for k in names}
+            print(f"synthetic data: {scene.name} with {true}, noise {args.noise:g}", file=sys.stderr)
+            data = synthetic_data(args.scene, {**overrides, **true}, observables, noise=args.noise,
+                                  seed=args.seed, every=args.every)
+            out.mkdir(parents=True, exist_ok=True)
+            data.save(out / "data.csv")
+        else:
+            if args.observables or args.noise or args.every != 1 or args.t_end is not None:
+                raise ConfigError("--observables, --noise, --every and --t-end apply to --synthetic only "
+                                  "(with --data the file's columns and times are used)")
+            data = Data.load(args.data)
+            true = None
+        print(f"identifying {', '.join(names)} with {args.optimizer} ({args.adjoint} gradients) ...", file=sys.stderr)
+        result = identify(args.scene, names, data, overrides=overrides, initial=initial, optimizer=args.optimizer,
+                          progress=True, max_steps=args.max_steps, learning_rate=args.learning_rate, true=true,
+                          adjoint=adjoint_named(args.adjoint), first_step_limit=args.first_step_limit)
+        paths = write_identification(result, data, out, title=f"{scene.name}: {', '.join(names)}", scene=scene,
+                                     plots=not args.no_plots)
+        for k in names:
+            line = f"{k}: initial {result.initial[k]:.6g} -> recovered {result.recovered[k]:.6g}"
+            if true is not None:
+                line += f" (true {true[k]:.6g}, relative error {result.summary()['relative_error'][k]:.2e})"
+            print(line)
+        print(f"{result.iterations} iterations, loss {result.losses[0]:.3e} -> {result.losses[-1]:.3e}, "
+              f"{result.wall_time_s:.2f} s (compile {result.compile_time_s:.1f} s)")
+        print("wrote " + ", ".join(str(p) for p in paths.values()))
+        verdict = "converged" if result.converged else "error: the fit did not converge"
+        print(f"{verdict}: {result.stop_message}", file=sys.stdout if result.converged else sys.stderr)
+        return 0 if result.converged else EXIT_FAILED
 
 
 def _sweep(args) -> int:
+    from contextlib import nullcontext
+
     from .first_step import check_limit
-    from .folders import writable_folder
+    from .folders import refusable_folder
     from .scenes import parse_override
     from .sweep import parse_grid, sweep
     from .validation import integer
@@ -288,10 +290,9 @@ def _sweep(args) -> int:
     if args.devices is not None and not 1 <= args.devices <= len(jax.devices()):
         raise ConfigError(f"--devices must be in [1, {len(jax.devices())}], got {args.devices}")
     out = args.out or Path("nsga_out") / f"{Path(args.scene).stem}_sweep"
-    if jax.process_index() == 0:  # process 0 alone writes the sweep's files
-        writable_folder(out)
+    folder = refusable_folder(out) if jax.process_index() == 0 else nullcontext()  # process 0 alone writes
     try:
-        with one_line_warnings():  # the redundancy report as one line, before the batches run
+        with folder, one_line_warnings():  # the redundancy report as one line, before the batches run
             result = sweep(args.scene, grid, hs=hs, overrides=dict(parse_override(s) for s in args.set), out=out,
                            batch_size=args.batch_size, devices=devices, max_records=args.max_records,
                            progress=not args.quiet, plots=not args.no_plots,

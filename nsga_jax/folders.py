@@ -15,6 +15,8 @@ import json
 import os
 import shutil
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from .results import ConfigError
@@ -88,6 +90,12 @@ def release_run_folder(path: Path, created: Path | None) -> None:
     for folder in (path / "partial", path):
         if folder.is_dir() and not any(folder.iterdir()) and (folder != path or created is not None):
             folder.rmdir()
+    _remove_empty_parents(path, created)
+
+
+def _remove_empty_parents(path: Path, created: Path | None) -> None:
+    """Delete the empty parents of ``path`` up to ``created`` (which claiming
+    ``path`` created); nothing where ``created`` is ``None``."""
     if created is None:
         return
     created = created.absolute()
@@ -95,6 +103,25 @@ def release_run_folder(path: Path, created: Path | None) -> None:
             and not any(path.parent.iterdir()):
         path = path.parent
         path.rmdir()
+
+
+@contextmanager
+def refusable_folder(path: Path, what: str = "output folder") -> Iterator[Path]:
+    """``path`` made writable (:func:`writable_folder`) for a command that may
+    still refuse its input (:class:`ConfigError`) before writing anything
+    there: on such a refusal the folders this created are deleted again where
+    they are empty, so that a refused sweep, study or fit leaves no empty
+    folder behind. A folder that existed before is kept."""
+    created = first_missing(path)
+    path = writable_folder(path, what)
+    try:
+        yield path
+    except ConfigError:
+        absolute = path.absolute()
+        if created is not None and absolute.is_dir() and not any(absolute.iterdir()):
+            absolute.rmdir()
+            _remove_empty_parents(absolute, created)
+        raise
 
 
 def free_folder(base: Path) -> Path:
@@ -109,4 +136,4 @@ def free_folder(base: Path) -> Path:
 
 
 __all__ = ["RUN_FILES", "claim_run_folder", "earlier_run_files", "first_missing", "free_folder",
-           "release_run_folder", "writable_folder"]
+           "refusable_folder", "release_run_folder", "writable_folder"]

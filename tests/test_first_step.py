@@ -177,6 +177,14 @@ def test_the_sweep_command_refuses_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == EXIT_INPUT and "Traceback" not in "\n".join(err)
     assert re.match(r"error: a batch of bouncing_ball: the first step of DS on 1 coordinates \(2 members", err[-1])
+    assert not (tmp_path / "s").exists()  # a refused sweep leaves no empty folder
+    (tmp_path / "deep").mkdir()
+    assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--first-step-limit", "1e-15", "--quiet",
+                 "--out", str(tmp_path / "deep" / "er" / "s")]) == EXIT_INPUT
+    assert list((tmp_path / "deep").iterdir()) == []  # nor the parents it created; one that existed stays
+    assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--first-step-limit", "1e-15", "--quiet",
+                 "--out", str(tmp_path / "deep")]) == EXIT_INPUT
+    assert (tmp_path / "deep").is_dir()  # a folder the user made is never deleted
     assert main(["sweep", "bouncing_ball", "--grid", "e=0.5", "--first-step-limit", "-1", "--quiet"]) == EXIT_INPUT
     assert "--first-step-limit must be a positive number of seconds" in capsys.readouterr().err
 
@@ -196,5 +204,6 @@ def test_studies_and_identification_take_the_limit(tmp_path, capsys, no_compilat
     code = main(["convergence", "bouncing_ball", "--ref", "exact", "--h", "1e-3,9e-4", "--t-end", "0.01",
                  "--first-step-limit", "1e-15", "--out", str(tmp_path / "c")])
     assert code == EXIT_INPUT and re.search(r"error: the batch: the first step of DS", capsys.readouterr().err)
+    assert not (tmp_path / "c").exists()  # a refused study leaves no empty folder
     assert main(["identify", "bouncing_ball", "--params", "e", "--synthetic", "--first-step-limit", "0"]) == EXIT_INPUT
     assert "--first-step-limit must be a positive number of seconds" in capsys.readouterr().err
