@@ -62,3 +62,25 @@ def test_rocking_block_rests_for_a_minute(h):
     q, ts = np.asarray(sol.q), np.asarray(sol.ts)
     last = ts >= ts[-1] - 10.0
     assert np.abs(q[last] - q[last][0]).max() < 1e-9
+
+
+def _theta(mu: float, t_end: float):
+    sol = load_scene("rocking_block", {"h": 1e-3, "t_end": t_end, "mu": mu}).run(throw=False)
+    assert sol.stats["failed_steps"] == 0, (mu, sol.failed_steps)
+    return np.asarray(sol.observables["theta"]), np.asarray(sol.observables["energy"])
+
+
+@pytest.mark.parametrize("mu, t_end", [(1e4, 1.0), pytest.param(1e2, 2.2, marks=pytest.mark.slow),
+                                       pytest.param(1e4, 2.2, marks=pytest.mark.slow)])
+def test_high_friction_is_the_sticking_solution(mu, t_end):
+    """μ → ∞: the corners of the rocking block stick at μ = 1 already (they
+    slide by less than 1e-12 m on the floor, test_friction_scenes), so a
+    higher μ must give the same motion. At μ = 1e4 every landing failed
+    (t = 0.258 s, 0.63 s, ...: the position correction pushed the corners
+    apart along the null direction's arbitrary sign until one slid, and
+    cycled; the landing lifts the other corner instead). Measured: θ within
+    2.3e-10 rad of the μ = 1 run over 2.2 s (3 landings before 1 s)."""
+    theta, energy = _theta(mu, t_end)
+    theta_1, energy_1 = _theta(1.0, t_end)
+    assert np.abs(theta - theta_1).max() < 1e-8
+    np.testing.assert_allclose(energy, energy_1, rtol=1e-8)

@@ -244,22 +244,45 @@ class FrictionLaw(NamedTuple):
         def pivoted():
             x0, null, _ = minimum_norm_split(system, rhs, compliant_matrix(shift))
             dW = -y + B @ x0[:m]
-            tau = self.first_slip(lam + x0[m:], rate + G_low @ dW, null[m:], G_low @ (B @ null[:m]))
+            tau = self.first_slip(lam + x0[m:], rate + G_low @ dW, null[m:], G_low @ (B @ null[:m]), bound)
             return x0 + lax.stop_gradient(tau) * null
 
         sol = where_needed(pivot, pivoted, sol)
         return -y + B @ sol[:m], sol[m:]
 
-    def first_slip(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array) -> jax.Array:
+    def first_slip(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
+                   bound: Scalar) -> jax.Array:
+        """The step τ along ±(d_lam, d_rate) from the law at (lam, rate) to
+        the nearest point where the active set can change (:meth:`first_event`
+        each way), signed: of the two, the one where the law's rows are the
+        smaller. A null direction's sign is arbitrary (an SVD's), and only one
+        way may lead to the solution: a block landing flat with a high μ
+        lifts its other corner (the minimum-norm point, τ = 0, has it open),
+        where the other way pushes its corners apart until one slides and
+        Newton cycles between the branches of that corner's disk."""
+        ahead = self.first_event(lam, rate, d_lam, d_rate, bound)
+        back = self.first_event(lam, rate, -d_lam, -d_rate, bound)
+
+        def rows(tau):
+            return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
+
+        return jnp.where(rows(-back) < rows(ahead), -back, ahead)
+
+    def first_event(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
+                    bound: Scalar) -> jax.Array:
         """The least τ >= 0 at which a sticking contact of the law at
         (lam + τ d_lam, rate + τ d_rate) reaches the edge of its disk,
-        |σ_T,j(τ)| = μ_j P_N,j(τ), times 1 + :data:`SLIP_MARGIN` (0 when
-        none does). Along a null direction of the Newton system of redundant
-        sticking contacts (module docstring) the coordinates do not move
-        and the law is affine in τ, so each contact's condition is a
-        quadratic in τ; where a contact may not stick (a block landing flat
-        on two corners turns, so one of them slides) the iterate is moved
-        just past the point where the first one starts to slide."""
+        |σ_T,j(τ)| = μ_j P_N,j(τ), or an active contact's normal impulse
+        reaches zero, times 1 + :data:`SLIP_MARGIN` (0 when none does), or
+        less past it where the law's rows would grow there by more than
+        :data:`PIVOT_FRACTION` of ``bound`` (a high μ_j, whose disk shrinks
+        fast along the direction: the overshoot alone would then be a residual
+        far above the one the step leaves). Along a null direction of the
+        Newton system of redundant sticking contacts (module docstring) the
+        coordinates do not move and the law is affine in τ, so each contact's
+        condition is a quadratic in τ; where a contact may not stick (a block
+        landing flat on two corners turns, so one of them slides) the iterate
+        is moved just past the point where the first one starts to slide."""
         nc, d = self.unilateral.shape[0], self.d
         normals = jnp.asarray(self.normals)
 
@@ -290,4 +313,12 @@ class FrictionLaw(NamedTuple):
         daug = self.k * d_lam[:nc] - self.p * d_rate[:nc]
         opens = self(lam, rate).active & self.unilateral & (aug0 > 0)
         first = jnp.minimum(first, jnp.min(jnp.where(opens, positive(-aug0, daug), inf), initial=inf))
-        return jnp.where(jnp.isfinite(first), (1.0 + SLIP_MARGIN) * first, 0.0)
+        first = jnp.where(jnp.isfinite(first), first, 0.0)
+
+        def rows(tau):
+            return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
+
+        growth = rows((1.0 + SLIP_MARGIN) * first) - rows(first)  # linear in the margin past the edge
+        scale = jnp.where(growth > PIVOT_FRACTION * bound, PIVOT_FRACTION * bound / jnp.where(growth > 0, growth, 1.0),
+                          1.0)
+        return (1.0 + SLIP_MARGIN * scale) * first
