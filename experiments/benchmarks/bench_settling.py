@@ -1,8 +1,11 @@
 """The rocking block coming to rest on its two frictional corners
 (docs/friction.md, *Settling on redundant contacts*): for each step size,
 failed steps, Newton iterations of the position correction (mean / max), the
-final tilt, the drift of the coordinates over the last 10 s, and the largest
-energy above the start, printed as a Markdown table.
+final tilt, the drift of the coordinates over the last 10 s, the largest
+energy above the start, and the impacts (landings: θ changes sign) against
+the exact solution's (:func:`~nsga_jax.exact.rocking_impact_times`) while
+they are resolvable (the interval since the last one at least
+``RESOLVABLE`` steps), printed as a Markdown table.
 
     python experiments/benchmarks/bench_settling.py [--t-end 60] [--h 1e-3 2e-3 4e-3] [--mu 1.0]
 """
@@ -13,18 +16,37 @@ import argparse
 
 import numpy as np
 
+from nsga_jax.exact import rocking_impact_times
 from nsga_jax.scenes import load_scene
+
+RESOLVABLE = 10
+"""Steps between two impacts of the exact solution for the second to count
+as resolvable."""
+
+
+def landings(theta: np.ndarray) -> np.ndarray:
+    """Indices of the records where θ has changed sign since the last nonzero
+    one (|θ| < 1e-12 counts as flat, not as a sign)."""
+    sign = np.sign(np.where(np.abs(theta) < 1e-12, 0.0, theta))
+    nonzero = np.nonzero(sign)[0]
+    return nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]
 
 
 def measure(h: float, t_end: float, mu: float) -> str:
-    sol = load_scene("rocking_block", {"h": h, "t_end": t_end, "mu": mu}).run(throw=False)
+    scene = load_scene("rocking_block", {"h": h, "t_end": t_end, "mu": mu})
+    sol = scene.run(throw=False)
     q, ts = np.asarray(sol.q), np.asarray(sol.ts)
     last = ts >= ts[-1] - 10.0
     drift = float(np.abs(q[last] - q[last][0]).max())
     energy = np.asarray(sol.observables["energy"])
     its = sol.stats["iterations"]["position"]
+    p = scene.parameters
+    exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
+    resolvable = exact[: int(np.argmax(np.diff(exact, prepend=0.0) < RESOLVABLE * h))]
+    measured = ts[landings(np.asarray(sol.observables["theta"]))]
     return (f"| {h:g} | {mu:g} | {t_end:g} | {sol.stats['failed_steps']} | {its['mean']:.4f} / {its['max']} | "
-            f"{float(q[-1, 2]):.1e} | {drift:.1e} | {float(energy.max() / energy[0] - 1):.1e} |")
+            f"{float(q[-1, 2]):.1e} | {drift:.1e} | {float(energy.max() / energy[0] - 1):.1e} | "
+            f"{len(measured)} (last {measured[-1]:.3f} s) | {len(resolvable)} (to {resolvable[-1]:.3f} s) |")
 
 
 def main() -> None:
@@ -34,8 +56,8 @@ def main() -> None:
     parser.add_argument("--mu", type=float, default=1.0)
     args = parser.parse_args()
     print("| h [s] | mu | t_end [s] | failed steps | position its. mean / max | final tilt [rad] | "
-          "drift, last 10 s [m] | energy above start (rel.) |")
-    print("|---|---|---|---|---|---|---|---|")
+          "drift, last 10 s [m] | energy above start (rel.) | impacts | exact, resolvable |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for h in args.h:
         print(measure(h, args.t_end, args.mu), flush=True)
 
