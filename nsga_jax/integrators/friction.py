@@ -197,9 +197,10 @@ class FrictionLaw(NamedTuple):
         part. Where that solution misses the system by more than a tenth of
         ``bound`` (the sub-problem's tolerance of eq. 51: the active set cannot
         hold, e.g. both corners of a landing block sticking), the minimum-norm
-        solution and the null direction n are taken by SVD instead, and the
-        multipliers moved along n to the first contact that reaches the edge
-        of its disk or opens (:meth:`first_slip`). ``bound = None``: the
+        solution and the null direction n are taken by SVD instead: the
+        minimum-norm solution is the step where it changes the active set,
+        else the multipliers are moved along ±n to the first contact that
+        reaches the edge of its disk or opens (:meth:`first_slip`). ``bound = None``: the
         compliant solve alone (Moreau–Jean's one-level problem, and the
         impact-time rebuild, whose correction must be linear in r₁, r_c).
         docs/friction.md gives the reasoning."""
@@ -244,7 +245,11 @@ class FrictionLaw(NamedTuple):
         def pivoted():
             x0, null, _ = minimum_norm_split(system, rhs, compliant_matrix(shift))
             dW = -y + B @ x0[:m]
-            tau = self.first_slip(lam + x0[m:], rate + G_low @ dW, null[m:], G_low @ (B @ null[:m]), bound)
+            # the minimum-norm point changes the active set already (a landing: the corner that must lift
+            # is open there): it is the step; else the event along ±n with the smaller law rows
+            changed = jnp.any(self(lam, rate).active != self(lam + x0[m:], rate + G_low @ dW).active)
+            tau = jnp.where(changed, 0.0,
+                            self.first_slip(lam + x0[m:], rate + G_low @ dW, null[m:], G_low @ (B @ null[:m]), bound))
             return x0 + lax.stop_gradient(tau) * null
 
         sol = where_needed(pivot, pivoted, sol)
@@ -254,14 +259,15 @@ class FrictionLaw(NamedTuple):
                    bound: Scalar) -> jax.Array:
         """The step τ along ±(d_lam, d_rate) from the law at (lam, rate) to
         the nearest point where the active set can change (:meth:`first_event`
-        each way), signed: of the two, the one where the law's rows are the
-        smaller. A null direction's sign is arbitrary (an SVD's), and only one
-        way may lead to the solution: a block landing flat with a high μ
-        lifts its other corner (the minimum-norm point, τ = 0, has it open),
-        where the other way pushes its corners apart until one slides and
-        Newton cycles between the branches of that corner's disk."""
+        each way; 0 where there is none), signed: of the two, the one where
+        the law's rows are the smaller (the nearer one alone let a corner
+        slide the wrong way, leaving the inconsistency). A null direction's sign is
+        arbitrary (an SVD's): with the events ahead only, a block landing flat
+        with a high μ had its corners pushed apart until one slid, and Newton
+        cycled between the branches of that corner's disk."""
         ahead = self.first_event(lam, rate, d_lam, d_rate, bound)
         back = self.first_event(lam, rate, -d_lam, -d_rate, bound)
+        ahead, back = (jnp.where(jnp.isfinite(x), x, 0.0) for x in (ahead, back))
 
         def rows(tau):
             return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
@@ -313,7 +319,8 @@ class FrictionLaw(NamedTuple):
         daug = self.k * d_lam[:nc] - self.p * d_rate[:nc]
         opens = self(lam, rate).active & self.unilateral & (aug0 > 0)
         first = jnp.minimum(first, jnp.min(jnp.where(opens, positive(-aug0, daug), inf), initial=inf))
-        first = jnp.where(jnp.isfinite(first), first, 0.0)
+        found = jnp.isfinite(first)
+        first = jnp.where(found, first, 0.0)
 
         def rows(tau):
             return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
@@ -321,4 +328,4 @@ class FrictionLaw(NamedTuple):
         growth = rows((1.0 + SLIP_MARGIN) * first) - rows(first)  # linear in the margin past the edge
         scale = jnp.where(growth > PIVOT_FRACTION * bound, PIVOT_FRACTION * bound / jnp.where(growth > 0, growth, 1.0),
                           1.0)
-        return (1.0 + SLIP_MARGIN * scale) * first
+        return jnp.where(found, (1.0 + SLIP_MARGIN * scale) * first, jnp.inf)
