@@ -268,18 +268,20 @@ class FrictionLaw(NamedTuple):
         ahead = self.first_event(lam, rate, d_lam, d_rate, bound)
         back = self.first_event(lam, rate, -d_lam, -d_rate, bound)
         ahead, back = (jnp.where(jnp.isfinite(x), x, 0.0) for x in (ahead, back))
+        smaller = self.rows_along(lam, rate, d_lam, d_rate, -back) < self.rows_along(lam, rate, d_lam, d_rate, ahead)
+        return jnp.where(smaller, -back, ahead)
 
-        def rows(tau):
-            return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
-
-        return jnp.where(rows(-back) < rows(ahead), -back, ahead)
+    def rows_along(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
+                   tau: Scalar) -> jax.Array:
+        """The norm of the law's residual rows at (lam + τ d_lam, rate + τ d_rate)."""
+        return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
 
     def first_event(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
                     bound: Scalar) -> jax.Array:
         """The least τ >= 0 at which a sticking contact of the law at
         (lam + τ d_lam, rate + τ d_rate) reaches the edge of its disk,
         |σ_T,j(τ)| = μ_j P_N,j(τ), or an active contact's normal impulse
-        reaches zero, times 1 + :data:`SLIP_MARGIN` (0 when none does), or
+        reaches zero, times 1 + :data:`SLIP_MARGIN` (∞ when none does), or
         less past it where the law's rows would grow there by more than
         :data:`PIVOT_FRACTION` of ``bound`` (a high μ_j, whose disk shrinks
         fast along the direction: the overshoot alone would then be a residual
@@ -321,11 +323,8 @@ class FrictionLaw(NamedTuple):
         first = jnp.minimum(first, jnp.min(jnp.where(opens, positive(-aug0, daug), inf), initial=inf))
         found = jnp.isfinite(first)
         first = jnp.where(found, first, 0.0)
-
-        def rows(tau):
-            return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
-
-        growth = rows((1.0 + SLIP_MARGIN) * first) - rows(first)  # linear in the margin past the edge
+        growth = (self.rows_along(lam, rate, d_lam, d_rate, (1.0 + SLIP_MARGIN) * first)
+                  - self.rows_along(lam, rate, d_lam, d_rate, first))  # linear in the margin past the edge
         scale = jnp.where(growth > PIVOT_FRACTION * bound, PIVOT_FRACTION * bound / jnp.where(growth > 0, growth, 1.0),
                           1.0)
         return jnp.where(found, (1.0 + SLIP_MARGIN * scale) * first, jnp.inf)
