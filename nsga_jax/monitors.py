@@ -27,6 +27,11 @@ contact (the step resolves them simultaneously)."""
 ENERGY_WARNING = "energy rise at an impact"
 """The start of the warning :func:`invariant_warnings` gives for energy
 created at an impact step (what ``strict`` turns into a failure)."""
+
+CHAIN_REACH = 2.0
+"""The most an impact's neighbour can travel in a step, in units of the
+impact's own approach over the step: an impact with e <= 1 gives a body at
+most twice the speed that struck it."""
 ENERGETIC_HINT = ('the impact law impact_law = "energetic" (DS, DSn; Python: DS(impact_law="energetic"), '
                   'a config\'s [solver] impact_law, or --impact-law energetic) cannot create energy')
 """What the energy warning offers where friction and e > 0 can cause the rise."""
@@ -167,9 +172,12 @@ class RunTotals:
         """Count the steps where an impact closed another contact within the
         step: a contact that takes an impulse together with another, open at
         the step's start (gap above round-off) and closing by its own motion
-        (its change over the step before) by less than half its gap. The step
-        then resolves in one simultaneous impact what happens in sequence (a
-        Newton's cradle whose gaps are shorter than a step's travel)."""
+        (its change over the step before) by less than half its gap, yet within
+        :data:`CHAIN_REACH` times the travel over the step of the contacts that
+        close by their own motion (a gap that jumps, as a corner's that enters
+        a bounded face, is closed by no impact). The step then resolves in one
+        simultaneous impact what happens in sequence (a Newton's cradle whose
+        gaps are shorter than a step's travel)."""
         nu = gap.shape[1]
         history = gap if self.recent_gaps is None else np.concatenate([self.recent_gaps, gap])
         lead = len(history) - len(gap)
@@ -181,12 +189,16 @@ class RunTotals:
                 continue
             start, before = history[k - 1], history[k - 2]
             own = 2.0 * start - before  # the gap at the step's end by the contact's own motion
-            chained = hit[i] & (start > floor) & (own > 0.5 * start)
+            others = hit[i] & (start > floor) & (own > 0.5 * start)
+            # the travel of the impacts that close by their own motion, per step
+            approach = float(np.max(np.where(hit[i] & ~others, before - start, 0.0), initial=0.0))
+            # ... within reach of it: an impact of e <= 1 at most doubles a speed (a gap that jumps, as a
+            # corner's that enters a bounded face, closes no impact)
+            chained = others & (start <= CHAIN_REACH * approach)
             if chained.any():
                 self.chained_steps += 1
                 if self.first_chain is None:
                     j = int(np.argmax(chained))
-                    approach = float(np.max(np.where(hit[i] & ~chained, before - start, 0.0)))
                     self.first_chain = (first_step + int(i), j, float(start[j]), approach)
         self.recent_gaps = history[-2:]
 

@@ -155,3 +155,20 @@ def test_gaps_shorter_than_a_step_warn_that_the_impacts_were_simultaneous():
     sol = load_scene("newtons_cradle", {"n_balls": 3, "gap": 1e-3, "h": 1e-4}).run()
     np.testing.assert_allclose(sol.v[-1], [0.0, 0.0, 1.0], atol=1e-9)
     assert not any(w.startswith("impacts in sequence") for w in sol.warnings)
+
+
+def test_a_gap_that_jumps_is_no_impact_in_sequence():
+    """Two contacts take impulses in one step; the second was open at the
+    step's start. Its gap of 0.1 m (a corner entering a bounded face, whose
+    gap jumps from the face's half extent to zero) is beyond the reach of the
+    first impact's approach of 1 mm per step: no impacts in sequence. A gap
+    of 1.5 mm (within twice the approach) is one."""
+    from nsga_jax.monitors import RunTotals
+
+    impulse = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])
+    for start, chained in ((0.1, 0), (1.5e-3, 1)):
+        totals = RunTotals()
+        totals.start_gaps(np.array([2e-3, start]), np.array([-1.0, 0.0]), 1e-3)  # the first closes at 1 m/s
+        gap = np.array([[1e-3, start], [0.0, start], [0.0, 0.0]])
+        totals._add_chains(gap, impulse, 1)
+        assert totals.chained_steps == chained
