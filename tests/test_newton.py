@@ -242,3 +242,55 @@ def test_a_batch_with_held_factorisations_equals_single_runs():
         single = simulate(scene.model, scheme, 0.0, 0.2, 2e-3, scene.q0, scene.v0)
         assert single.records.active_velocity.any()
         np.testing.assert_allclose(q[k, :n], single.q[1:], rtol=0, atol=1e-9 * np.abs(single.q).max())
+
+
+def arctan_root(scale: float, restart=None, root=0.0) -> Problem:
+    """r(x) = scale · arctan((x - root) / scale), root x = ``root`` for every
+    scale: Newton from |(x0 - root) / scale| > 1.39 runs away (its updates
+    overshoot ever more), nearer it converges; the problems of two scales are
+    two forms of one."""
+
+    def residual(x):
+        return Residual(scale * jnp.arctan((x - root) / scale), jnp.asarray(TOL), None)
+
+    def update(x, res):
+        return -res.r * (1.0 + ((x - root) / scale) ** 2), jnp.zeros(())
+
+    return Problem.from_update(residual, update)._replace(restart=restart)
+
+
+def test_a_stalled_problem_is_restarted_in_its_other_form():
+    x0 = jnp.full((1,), 1.5)
+    alone = newton(arctan_root(1.0), x0, 20)
+    assert not alone.converged
+    other = newton(arctan_root(5.0), x0, 20)
+    assert other.converged
+    restarted = jax.jit(lambda x: newton(arctan_root(1.0, lambda: arctan_root(5.0)), x, 20))(x0)
+    assert restarted.converged
+    np.testing.assert_array_equal(restarted.x, other.x)  # the second run, from the same start
+    assert restarted.iterations == alone.iterations + other.iterations
+    # a problem that converges is solved as it was: the restart is never run
+    near = jnp.full((1,), 0.5)
+    plain = newton(arctan_root(1.0), near, 20)
+    with_restart = newton(arctan_root(1.0, lambda: arctan_root(5.0)), near, 20)
+    assert plain.converged and with_restart.iterations == plain.iterations
+    np.testing.assert_array_equal(with_restart.x, plain.x)
+
+
+def test_the_derivative_of_a_restarted_solve_is_the_roots():
+    """Through :func:`solve`'s implicit derivative: the root θ found by the
+    restart has dx*/dθ = 1."""
+    from nsga_jax.integrators.newton import solve
+
+    def builder(theta):
+        return arctan_root(1.0, lambda: arctan_root(5.0, root=theta), root=theta)
+
+    def root(theta):
+        sol = solve(builder, (theta,), jnp.full((1,), 1.5), 20)
+        return sol.x[0], sol.iterations
+
+    (x, iterations), grad = jax.jit(jax.value_and_grad(root, has_aux=True))(jnp.asarray(0.1))
+    alone = newton(arctan_root(5.0, root=0.1), jnp.full((1,), 1.5), 20)
+    assert iterations > alone.iterations  # the first form ran away from x0 = 1.5: found by the restart
+    np.testing.assert_allclose(x, 0.1, atol=1e-12)
+    np.testing.assert_allclose(grad, 1.0, rtol=1e-12)

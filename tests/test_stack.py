@@ -121,6 +121,42 @@ def test_ten_boxes_rest(dim):
     _at_rest(load_scene("box_stack", {"dim": dim, "n_boxes": 10, "t_end": 1.0 if dim == 2 else 0.01}).run())
 
 
+@pytest.mark.parametrize("restarts", [False, True])
+def test_a_pushed_stack_restarts_the_step_that_cycles(monkeypatch, restarts):
+    """Six planar boxes, the top one pushed at 2 m/s, at t = 0.037 s (the
+    state saved from a run): in the next step the velocity jump cycles between
+    a contact's stick and slip branches until the iteration cap. Run again
+    from its start with the tangential penalties rescaled
+    (``RESTART_PENALTIES``: the same solution, another Newton path), it
+    converges, and the record counts every run's iterations."""
+    from nsga_jax.integrators import friction
+    from nsga_jax.integrators.base import StepState
+
+    if not restarts:
+        monkeypatch.setattr(friction, "RESTART_PENALTIES", ())
+    saved = np.load(Path(__file__).parent / "data" / "box_stack_6_pushed_step37.npz")
+    scene = load_scene("box_stack", {"n_boxes": 6, "push": 2.0})
+    model, scheme, h = scene.model, scene.scheme(), scene.solver["h"]
+    state = StepState(**{k: jnp.asarray(saved[k]) for k in ("t", "q", "v", "vd", "a")})
+    _, out = jax.jit(lambda s: scheme.step(model, scheme.prepare(model, h, 0.0), s, h))(state)
+    cap = scene.solver["max_iter"]
+    velocity = int(out.newton.iterations[2])
+    if restarts:
+        assert int(out.result) == 0 and cap < velocity <= 3 * cap
+    else:
+        assert int(out.result) != 0 and velocity == cap
+
+
+@pytest.mark.slow
+def test_ten_pushed_planar_boxes_come_to_rest_without_a_failed_step():
+    """Ten planar boxes, the top one pushed at 2 m/s, for 3 s: 45 steps failed
+    (2-cycles of the semi-smooth Newton) before the restarts with another
+    tangential penalty; now none does and the stack ends at rest."""
+    sol = load_scene("box_stack", {"n_boxes": 10, "push": 2.0, "t_end": 3.0}).run(throw=False)
+    assert sol.stats["failed_steps"] == 0
+    assert float(sol.observables["speed"][-1]) < 1e-9
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("dim", [2, 3])
 def test_a_pushed_stack_comes_to_rest(dim):

@@ -29,7 +29,7 @@ from .base import (
     AbstractScheme,
     StepState,
 )
-from .friction import FrictionLaw, has_friction, projection_start, velocity_rows
+from .friction import FrictionLaw, has_friction, projection_start, restarted, velocity_rows
 from .linalg import solve_bordered
 from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve
@@ -117,64 +117,69 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
         law = FrictionLaw.of(model, candidates, unilateral, kv, pv, jnp.diagonal(ops.mass.matrix(model, q_n)),
                              model.tangent_jacobian(q_n))
 
-    def position(v):
-        return q_n + h * (theta * v + (1.0 - theta) * v_n)
+    def build(law: FrictionLaw | None) -> Problem:
+        """The step with the contact law ``law`` (:func:`~nsga_jax.integrators.friction.restarted`)."""
 
-    def rows(q):
-        """g_q(q) (and g_T(q) below it, with friction) and the restitution term of each row."""
-        G = ops.constraints.jacobian(model, q)
-        if law is None:
-            return G, restituted
-        G = velocity_rows(model, q, G)
-        return G, jnp.concatenate([restituted, jnp.zeros((G.shape[0] - nc,), q.dtype)])
+        def position(v):
+            return q_n + h * (theta * v + (1.0 - theta) * v_n)
 
-    def residual(x):
-        v, Lam = x
-        q = position(v)
-        inertia = ops.mass.product(model, q, v - v_n)
-        force = h * (theta * model.force(q, v, t) + (1.0 - theta) * f_n)
-        if nc == 0:
-            return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())
-        G, e_term = rows(q)
-        gdot = G @ v + e_term
-        if law is not None:
-            res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
-            active, aug, tangential = res.aux
-            return res._replace(aux=VelocityAux(active, aug, gdot[:nc], tangential))
-        res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
-        return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
+        def rows(q):
+            """g_q(q) (and g_T(q) below it, with friction) and the restitution term of each row."""
+            G = ops.constraints.jacobian(model, q)
+            if law is None:
+                return G, restituted
+            G = velocity_rows(model, q, G)
+            return G, jnp.concatenate([restituted, jnp.zeros((G.shape[0] - nc,), q.dtype)])
 
-    def update(x, res):
-        v, Lam = x
-        q = position(v)
-        K, C, K_norm, C_norm = ops.force.tangents(model, q, v, t)
-        floor = roundoff_floor(h, K_norm, C_norm, q, v)
+        def residual(x):
+            v, Lam = x
+            q = position(v)
+            inertia = ops.mass.product(model, q, v - v_n)
+            force = h * (theta * model.force(q, v, t) + (1.0 - theta) * f_n)
+            if nc == 0:
+                return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())
+            G, e_term = rows(q)
+            gdot = G @ v + e_term
+            if law is not None:
+                res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
+                active, aug, tangential = res.aux
+                return res._replace(aux=VelocityAux(active, aug, gdot[:nc], tangential))
+            res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
+            return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
 
-        def matrix():  # M + hθ C + (hθ)² K, with the inertia stiffness and the constraint curvature
-            A = ops.mass.matrix(model, q) + h * theta * C + (h * theta) ** 2 * K
-            A = A + h * theta * model.inertia_stiffness(q, v - v_n)
-            if nc:
-                active, sigma = res.aux[0], res.aux[1]
-                A = A - h * theta * curvature(model, q, jnp.where(active, sigma, 0.0))
-            if law is not None and not model.linear_constraints:  # d(g_T^T P_T)/dq
-                A = A - h * theta * jax.jacfwd(lambda y: model.tangent_jacobian(y).T @ res.aux.friction)(q)
-            return A, K_norm, C_norm
+        def update(x, res):
+            v, Lam = x
+            q = position(v)
+            K, C, K_norm, C_norm = ops.force.tangents(model, q, v, t)
+            floor = roundoff_floor(h, K_norm, C_norm, q, v)
 
-        A = ops.velocity.factored(matrix)
-        if nc == 0:
-            return (-A.solve(res.r), Lam), floor
-        G, e_term = rows(q)
-        floor = floor + constraint_floor(kv, G, v)
-        G_low = G[:nc] + h * theta * convective(model, q, v)
-        if law is None:
-            dv, dLam = solve_bordered(A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv)
+            def matrix():  # M + hθ C + (hθ)² K, with the inertia stiffness and the constraint curvature
+                A = ops.mass.matrix(model, q) + h * theta * C + (h * theta) ** 2 * K
+                A = A + h * theta * model.inertia_stiffness(q, v - v_n)
+                if nc:
+                    active, sigma = res.aux[0], res.aux[1]
+                    A = A - h * theta * curvature(model, q, jnp.where(active, sigma, 0.0))
+                if law is not None and not model.linear_constraints:  # d(g_T^T P_T)/dq
+                    A = A - h * theta * jax.jacfwd(lambda y: model.tangent_jacobian(y).T @ res.aux.friction)(q)
+                return A, K_norm, C_norm
+
+            A = ops.velocity.factored(matrix)
+            if nc == 0:
+                return (-A.solve(res.r), Lam), floor
+            G, e_term = rows(q)
+            floor = floor + constraint_floor(kv, G, v)
+            G_low = G[:nc] + h * theta * convective(model, q, v)
+            if law is None:
+                dv, dLam = solve_bordered(A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv)
+                return (dv, dLam), floor
+            if not model.linear_constraints:  # d(g_T v)/dq, the tangential rows' convective part
+                G_low = jnp.concatenate([G_low, G[nc:] + h * theta * jax.jacfwd(
+                    lambda y: model.tangent_jacobian(y) @ v)(q)])
+            else:
+                G_low = jnp.concatenate([G_low, G[nc:]])
+            dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G_low, Lam, G @ v + e_term, None)
             return (dv, dLam), floor
-        if not model.linear_constraints:  # d(g_T v)/dq, the tangential rows' convective part
-            G_low = jnp.concatenate([G_low, G[nc:] + h * theta * jax.jacfwd(
-                lambda y: model.tangent_jacobian(y) @ v)(q)])
-        else:
-            G_low = jnp.concatenate([G_low, G[nc:]])
-        dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G_low, Lam, G @ v + e_term, None)
-        return (dv, dLam), floor
 
-    return Problem.from_update(residual, update)
+        return Problem.from_update(residual, update)._replace(restart=restarted(law, build))
+
+    return build(law)

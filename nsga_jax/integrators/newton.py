@@ -45,6 +45,7 @@ differentiates is the Newton loop alone.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -75,12 +76,15 @@ class Problem(NamedTuple):
     """The three functions of a Newton sub-problem (see the module docstring).
     ``line_search`` (static): damp each update until the residual norm
     decreases (:func:`damped_step`), for residuals whose semi-smooth Newton
-    may cycle (Coulomb friction's projection on a disk)."""
+    may cycle (Coulomb friction's projection on a disk). ``restart``: the
+    same sub-problem written another way (the same solution, another Newton
+    path), run from the start when Newton stalls (:func:`newton`), or ``None``."""
 
     residual: Callable[[Any], Residual]
     linearise: Callable[[Any, Residual], Any]
     correct: Callable[[Any, Residual, Any], tuple[Any, Scalar]]
     line_search: bool = False
+    restart: Callable[[], "Problem"] | None = None
 
     def update(self, x, res: Residual) -> tuple[Any, Scalar]:
         """The Newton correction with the iteration matrix at x."""
@@ -193,8 +197,25 @@ def newton(
     With a ``factorisation`` (possibly the empty placeholder) the loop is the
     modified Newton method of the module docstring, and the result carries the
     factorisation it ends with. A non-finite residual stops the loop at once
-    and is reported as not converged.
+    and is reported as not converged. A problem with a ``restart`` that has
+    not converged is run again from ``x0`` in its other form (up to
+    ``max_iter`` more iterations each, counted in the result), only where
+    needed (:func:`where_needed`).
     """
+    first = _newton_loop(problem, x0, max_iter, factorisation)
+    if problem.restart is None:
+        return first
+
+    def again():
+        second = newton(problem.restart(), x0, max_iter, factorisation)  # and its own restart, if any
+        return dataclasses.replace(second, iterations=first.iterations + second.iterations)
+
+    return where_needed(~first.converged, again, first)
+
+
+def _newton_loop(problem: Problem, x0: Any, max_iter: int | jax.Array,
+                 factorisation: Factorisation | None) -> NewtonResult:
+    """One Newton run of :func:`newton` (its ``restart`` aside)."""
     residual = problem.residual
     res0 = residual(x0)
     floor0 = jnp.zeros((), res0.r.dtype)

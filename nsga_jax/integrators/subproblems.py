@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
 from .coefficients import GenAlphaCoefficients
-from .friction import FrictionLaw, has_friction, velocity_rows
+from .friction import FrictionLaw, has_friction, restarted, velocity_rows
 from .krylov import element_top_left
 from .model_terms import ForceAt, convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound
@@ -165,60 +165,65 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             fp = fp + (G[:nb] - GB_smooth).T @ smooth.lam  # (g_q^T - g̃_q^T) λ̃, eq. 29
         return fp
 
-    def residual(x):
-        U, nu = x
-        q = smooth.q + U
-        g = model.constraints(q)
-        G = ops.constraints.jacobian(model, q)
-        inertia = ops.mass.product(model, smooth.q, U)
-        force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
-        if law is not None:
-            res = law.residual(inertia, force, jnp.concatenate([G, GT]), slip_rows(g, q), nu, tol_r, tol_f)
-            return res._replace(aux=PositionAux(res.aux[0], res.aux[1], gap=g, jacobian=G))
-        res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
-        return res._replace(aux=PositionAux(*res.aux, gap=g, jacobian=G))
-
-    def slip_rows(g, q):
-        """The gaps g(q) and, below them, the contact points' slip over the step Δ_T."""
-        return jnp.concatenate([g, GT @ (q - q_prev)])
-
-    def linearise(x, res):
-        def matrix():  # eq. 48's top-left block, S_t^p: -d(g_q^{A T} ξ^A)/dq - h² df^p/dq
-            U, _ = x
-            active, xi, _, _ = res.aux
+    def build(law: FrictionLaw | None) -> Problem:
+        """The sub-problem with the contact law ``law`` (:func:`~nsga_jax.integrators.friction.restarted`)."""
+        def residual(x):
+            U, nu = x
             q = smooth.q + U
-            # the penalty term is left to solve_bordered
-            mu = jnp.where(active, xi, 0.0)
-            A = ops.mass.matrix(model, smooth.q)
-            K_norm = C_norm = jnp.zeros((), q.dtype)
+            g = model.constraints(q)
+            G = ops.constraints.jacobian(model, q)
+            inertia = ops.mass.product(model, smooth.q, U)
+            force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
+            if law is not None:
+                res = law.residual(inertia, force, jnp.concatenate([G, GT]), slip_rows(g, q), nu, tol_r, tol_f)
+                return res._replace(aux=PositionAux(res.aux[0], res.aux[1], gap=g, jacobian=G))
+            res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
+            return res._replace(aux=PositionAux(*res.aux, gap=g, jacobian=G))
+
+        def slip_rows(g, q):
+            """The gaps g(q) and, below them, the contact points' slip over the step Δ_T."""
+            return jnp.concatenate([g, GT @ (q - q_prev)])
+
+        def linearise(x, res):
+            def matrix():  # eq. 48's top-left block, S_t^p: -d(g_q^{A T} ξ^A)/dq - h² df^p/dq
+                U, _ = x
+                active, xi, _, _ = res.aux
+                q = smooth.q + U
+                # the penalty term is left to solve_bordered
+                mu = jnp.where(active, xi, 0.0)
+                A = ops.mass.matrix(model, smooth.q)
+                K_norm = C_norm = jnp.zeros((), q.dtype)
+                if with_forces:
+                    K, _, K_norm, C_norm = ops.force.tangents(model, q, smooth.v, t)
+                    mu = mu + h**2 * pad_bilateral(model, smooth.lam)
+                    A = A + h**2 * K
+                return A - curvature(model, q, mu), K_norm, C_norm
+
+            def elements():  # M + h² K element by element (a matrix-free model: affine constraints)
+                return element_top_left(model, ops, smooth.q + x[0], 1.0, h**2 if with_forces else 0.0)
+
+            return ops.position.factored(matrix, elements)
+
+        def correct(x, res, matrix):
+            U, nu = x
+            active, xi, _, G = res.aux
+            q = smooth.q + U
+            floor = constraint_floor(kp, G, q)
             if with_forces:
-                K, _, K_norm, C_norm = ops.force.tangents(model, q, smooth.v, t)
-                mu = mu + h**2 * pad_bilateral(model, smooth.lam)
-                A = A + h**2 * K
-            return A - curvature(model, q, mu), K_norm, C_norm
-
-        def elements():  # M + h² K element by element (a matrix-free model: affine constraints)
-            return element_top_left(model, ops, smooth.q + x[0], 1.0, h**2 if with_forces else 0.0)
-
-        return ops.position.factored(matrix, elements)
-
-    def correct(x, res, matrix):
-        U, nu = x
-        active, xi, _, G = res.aux
-        q = smooth.q + U
-        floor = constraint_floor(kp, G, q)
-        if with_forces:
-            floor = floor + roundoff_floor(h**2, matrix.K_norm, matrix.C_norm, q, smooth.v)
-        if law is not None:
-            floor = floor + constraint_floor(kp, GT, q - q_prev)
-            G_all = jnp.concatenate([G, GT])
-            dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q),
-                                      res.bound)
+                floor = floor + roundoff_floor(h**2, matrix.K_norm, matrix.C_norm, q, smooth.v)
+            if law is not None:
+                floor = floor + constraint_floor(kp, GT, q - q_prev)
+                G_all = jnp.concatenate([G, GT])
+                dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q),
+                                          res.bound)
+                return (dU, dnu), floor
+            dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp, res.bound)
             return (dU, dnu), floor
-        dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp, res.bound)
-        return (dU, dnu), floor
 
-    return Problem(residual, linearise, correct, line_search=law is not None)
+        return Problem(residual, linearise, correct, line_search=law is not None,
+                       restart=restarted(law, build))
+
+    return build(law)
 
 
 def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,
@@ -256,48 +261,53 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             assert f_smooth is not None  # given whenever with_forces
             f_const = f_const + ops.force.change(model, f_smooth, q, smooth.v, t)
 
-    def residual(x):
-        W, Lam = x
-        v = smooth.v + W
-        gdot = G @ v + restituted
-        if with_forces:
-            f_star = f_const
-            if model.velocity_dependent_force:
-                f_star = f_star + ops.force.change(model, f_smooth, q, v, t)
-            force = h * f_star
-        else:
-            force = jnp.zeros_like(W)
-        inertia = ops.mass.product(model, q, W)
-        if law is not None:
-            res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
-            active, aug, tangential = res.aux
-            return res._replace(aux=VelocityAux(active, aug, gdot[:model.n_constraints], tangential))
-        res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
-        return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
+    def build(law: FrictionLaw | None) -> Problem:
+        """The sub-problem with the contact law ``law`` (:func:`~nsga_jax.integrators.friction.restarted`)."""
+        def residual(x):
+            W, Lam = x
+            v = smooth.v + W
+            gdot = G @ v + restituted
+            if with_forces:
+                f_star = f_const
+                if model.velocity_dependent_force:
+                    f_star = f_star + ops.force.change(model, f_smooth, q, v, t)
+                force = h * f_star
+            else:
+                force = jnp.zeros_like(W)
+            inertia = ops.mass.product(model, q, W)
+            if law is not None:
+                res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
+                active, aug, tangential = res.aux
+                return res._replace(aux=VelocityAux(active, aug, gdot[:model.n_constraints], tangential))
+            res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
+            return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
 
-    def linearise(x, res):
-        def matrix():  # eq. 49's top-left block, S_t^v
-            W, _ = x
-            A = ops.mass.matrix(model, q)
-            if not with_forces:
-                zero = jnp.zeros((), q.dtype)
-                return A, zero, zero
-            _, C, K_norm, C_norm = ops.force.tangents(model, q, smooth.v + W, t)
-            return A + h * C, K_norm, C_norm
+        def linearise(x, res):
+            def matrix():  # eq. 49's top-left block, S_t^v
+                W, _ = x
+                A = ops.mass.matrix(model, q)
+                if not with_forces:
+                    zero = jnp.zeros((), q.dtype)
+                    return A, zero, zero
+                _, C, K_norm, C_norm = ops.force.tangents(model, q, smooth.v + W, t)
+                return A + h * C, K_norm, C_norm
 
-        return ops.velocity.factored(matrix)
+            return ops.velocity.factored(matrix)
 
-    def correct(x, res, matrix):
-        W, Lam = x
-        active = res.aux[0]
-        v = smooth.v + W
-        floor = constraint_floor(kv, G, v)
-        if with_forces:
-            floor = floor + roundoff_floor(h, matrix.K_norm, matrix.C_norm, q, v)
-        if law is not None:
-            dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted, res.bound)
+        def correct(x, res, matrix):
+            W, Lam = x
+            active = res.aux[0]
+            v = smooth.v + W
+            floor = constraint_floor(kv, G, v)
+            if with_forces:
+                floor = floor + roundoff_floor(h, matrix.K_norm, matrix.C_norm, q, v)
+            if law is not None:
+                dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted, res.bound)
+                return (dW, dLam), floor
+            dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv, res.bound)
             return (dW, dLam), floor
-        dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv, res.bound)
-        return (dW, dLam), floor
 
-    return Problem(residual, linearise, correct, line_search=law is not None)
+        return Problem(residual, linearise, correct, line_search=law is not None,
+                       restart=restarted(law, build))
+
+    return build(law)
