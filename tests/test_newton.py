@@ -244,7 +244,7 @@ def test_a_batch_with_held_factorisations_equals_single_runs():
         np.testing.assert_allclose(q[k, :n], single.q[1:], rtol=0, atol=1e-9 * np.abs(single.q).max())
 
 
-def arctan_root(scale: float, restart=None, root=0.0) -> Problem:
+def arctan_root(scale, restart_to=None, root=0.0) -> Problem:
     """r(x) = scale · arctan((x - root) / scale), root x = ``root`` for every
     scale: Newton from |(x0 - root) / scale| > 1.39 runs away (its updates
     overshoot ever more), nearer it converges; the problems of two scales are
@@ -256,7 +256,12 @@ def arctan_root(scale: float, restart=None, root=0.0) -> Problem:
     def update(x, res):
         return -res.r * (1.0 + ((x - root) / scale) ** 2), jnp.zeros(())
 
-    return Problem.from_update(residual, update)._replace(restart=restart)
+    problem = Problem.from_update(residual, update)
+    if restart_to is None:
+        return problem
+    # restart(f): the scale times f, f = 1 first, then restart_to / scale
+    return problem._replace(restart=lambda f: arctan_root(f * scale, root=root),
+                            restart_factors=(restart_to / scale,))
 
 
 def test_a_stalled_problem_is_restarted_in_its_other_form():
@@ -265,14 +270,14 @@ def test_a_stalled_problem_is_restarted_in_its_other_form():
     assert not alone.converged
     other = newton(arctan_root(5.0), x0, 20)
     assert other.converged
-    restarted = jax.jit(lambda x: newton(arctan_root(1.0, lambda: arctan_root(5.0)), x, 20))(x0)
+    restarted = jax.jit(lambda x: newton(arctan_root(1.0, 5.0), x, 20))(x0)
     assert restarted.converged
     np.testing.assert_array_equal(restarted.x, other.x)  # the second run, from the same start
     assert restarted.iterations == alone.iterations + other.iterations
     # a problem that converges is solved as it was: the restart is never run
     near = jnp.full((1,), 0.5)
     plain = newton(arctan_root(1.0), near, 20)
-    with_restart = newton(arctan_root(1.0, lambda: arctan_root(5.0)), near, 20)
+    with_restart = newton(arctan_root(1.0, 5.0), near, 20)
     assert plain.converged and with_restart.iterations == plain.iterations
     np.testing.assert_array_equal(with_restart.x, plain.x)
 
@@ -283,7 +288,7 @@ def test_the_derivative_of_a_restarted_solve_is_the_roots():
     from nsga_jax.integrators.newton import solve
 
     def builder(theta):
-        return arctan_root(1.0, lambda: arctan_root(5.0, root=theta), root=theta)
+        return arctan_root(1.0, 5.0, root=theta)
 
     def root(theta):
         sol = solve(builder, (theta,), jnp.full((1,), 1.5), 20)

@@ -178,10 +178,11 @@ class FrictionLaw(NamedTuple):
         return cls(jnp.broadcast_to(candidates, unilateral.shape), unilateral, mu, model.friction_normals,
                    d, k, p, p_t)
 
-    def rescaled(self, factor: float) -> "FrictionLaw":
-        """The same law with its tangential penalties p_T times ``factor``:
-        the same solution, another Newton path (:data:`RESTART_PENALTIES`)."""
-        return self._replace(p_t=factor * self.p_t)
+    def rescaled(self, factor) -> "FrictionLaw":
+        """The same law with its tangential penalties p_T times ``factor`` (a
+        scalar, traced or not): the same solution, another Newton path
+        (:data:`RESTART_PENALTIES`)."""
+        return self._replace(p_t=jnp.asarray(factor, self.p_t.dtype) * self.p_t)
 
     def __call__(self, lam: jax.Array, rate: jax.Array) -> LawParts:
         return contact_law(lam, rate, self.candidates, self.unilateral, self.mu, self.normals, self.d,
@@ -345,13 +346,11 @@ class FrictionLaw(NamedTuple):
         return jnp.where(found, (1.0 + SLIP_MARGIN * scale) * first, jnp.inf)
 
 
-def restarted(law: FrictionLaw | None, build: Callable[[FrictionLaw], Problem],
-              factors: tuple[float, ...] | None = None) -> Callable[[], Problem] | None:
-    """The ``restart`` of a sub-problem built by ``build(law)``: the law with
-    its tangential penalties times each of ``factors`` in turn (``None``:
-    :data:`RESTART_PENALTIES`, read when traced),
-    or ``None`` without friction."""
-    factors = RESTART_PENALTIES if factors is None else factors
-    if law is None or not factors:
-        return None
-    return lambda: build(law.rescaled(factors[0]))._replace(restart=restarted(law, build, factors[1:]))
+def restarted(law: FrictionLaw | None, build: Callable[[FrictionLaw], Problem]) -> dict:
+    """The ``restart`` and ``restart_factors`` of a sub-problem built by
+    ``build(law)``: the law with its tangential penalties times a factor,
+    for each of :data:`RESTART_PENALTIES` (read when traced); none without
+    friction."""
+    if law is None or not RESTART_PENALTIES:
+        return {}
+    return {"restart": lambda factor: build(law.rescaled(factor)), "restart_factors": tuple(RESTART_PENALTIES)}

@@ -180,6 +180,6 @@ def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n
             dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G_low, Lam, G @ v + e_term, None)
             return (dv, dLam), floor
 
-        return Problem.from_update(residual, update)._replace(restart=restarted(law, build))
+        return Problem.from_update(residual, update)._replace(**restarted(law, build))
 
     return build(law)

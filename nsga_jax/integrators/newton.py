@@ -76,15 +76,18 @@ class Problem(NamedTuple):
     """The three functions of a Newton sub-problem (see the module docstring).
     ``line_search`` (static): damp each update until the residual norm
     decreases (:func:`damped_step`), for residuals whose semi-smooth Newton
-    may cycle (Coulomb friction's projection on a disk). ``restart``: the
-    same sub-problem written another way (the same solution, another Newton
-    path), run from the start when Newton stalls (:func:`newton`), or ``None``."""
+    may cycle (Coulomb friction's projection on a disk). ``restart(factor)``:
+    the same sub-problem written another way for each factor (the same
+    solution, another Newton path; ``restart(1.0)`` is the problem itself),
+    run from the start with each of ``restart_factors`` in turn while Newton
+    stalls (:func:`newton`), or ``None``."""
 
     residual: Callable[[Any], Residual]
     linearise: Callable[[Any, Residual], Any]
     correct: Callable[[Any, Residual, Any], tuple[Any, Scalar]]
     line_search: bool = False
-    restart: Callable[[], "Problem"] | None = None
+    restart: Callable[[jax.Array], "Problem"] | None = None
+    restart_factors: tuple[float, ...] = ()
 
     def update(self, x, res: Residual) -> tuple[Any, Scalar]:
         """The Newton correction with the iteration matrix at x."""
@@ -197,20 +200,33 @@ def newton(
     With a ``factorisation`` (possibly the empty placeholder) the loop is the
     modified Newton method of the module docstring, and the result carries the
     factorisation it ends with. A non-finite residual stops the loop at once
-    and is reported as not converged. A problem with a ``restart`` that has
-    not converged is run again from ``x0`` in its other form (up to
-    ``max_iter`` more iterations each, counted in the result), only where
-    needed (:func:`where_needed`).
+    and is reported as not converged. A problem with ``restart_factors`` that
+    has not converged is run again from ``x0`` as ``restart(factor)`` for each
+    factor in turn (up to ``max_iter`` more iterations each, counted in the
+    result). The runs are one Newton loop in a ``lax.while_loop`` over the
+    factors (1 first), so the loop is compiled once, and a step that converges
+    runs it once.
     """
-    first = _newton_loop(problem, x0, max_iter, factorisation)
-    if problem.restart is None:
-        return first
+    if problem.restart is None or not problem.restart_factors:
+        return _newton_loop(problem, x0, max_iter, factorisation)
+    real = jax.tree_util.tree_leaves(x0)[0].dtype
+    factors = jnp.asarray((1.0, *problem.restart_factors), real)
 
-    def again():
-        second = newton(problem.restart(), x0, max_iter, factorisation)  # and its own restart, if any
-        return dataclasses.replace(second, iterations=first.iterations + second.iterations)
+    def attempt(k):
+        return _newton_loop(problem.restart(factors[k]), x0, max_iter, factorisation)
 
-    return where_needed(~first.converged, again, first)
+    def stalled(carry):
+        k, result = carry
+        return ~result.converged & (k < factors.shape[0])
+
+    def again(carry):
+        k, result = carry
+        new = attempt(k)
+        return k + 1, dataclasses.replace(new, iterations=result.iterations + new.iterations)
+
+    shapes = jax.eval_shape(lambda: attempt(0))
+    nothing = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes)  # converged False, 0 iterations
+    return lax.while_loop(stalled, again, (jnp.zeros((), jnp.int32), nothing))[1]
 
 
 def _newton_loop(problem: Problem, x0: Any, max_iter: int | jax.Array,

@@ -220,8 +220,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp, res.bound)
             return (dU, dnu), floor
 
-        return Problem(residual, linearise, correct, line_search=law is not None,
-                       restart=restarted(law, build))
+        return Problem(residual, linearise, correct, line_search=law is not None, **restarted(law, build))
 
     return build(law)
 
@@ -307,7 +306,6 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
             dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv, res.bound)
             return (dW, dLam), floor
 
-        return Problem(residual, linearise, correct, line_search=law is not None,
-                       restart=restarted(law, build))
+        return Problem(residual, linearise, correct, line_search=law is not None, **restarted(law, build))
 
     return build(law)
