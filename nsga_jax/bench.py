@@ -31,7 +31,7 @@ from .compilation_cache import compilation_cache
 from .metrics import relative_l1_error
 from .precision import DTYPES, cast_floats
 from .results import ConfigError
-from .scenes.base import REGISTRY, Scene, load_scene
+from .scenes import REGISTRY, Scene, load_scene
 from .validation import choice, integer, real, step_count
 
 CASES: dict[str, dict] = {

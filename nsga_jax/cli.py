@@ -318,7 +318,7 @@ def _sweep(args) -> int:
 def _bench_scene(text: str) -> str:
     """A ``--scenes`` item: a built-in name, or a scene file (``.py`` or a TOML
     system file) whose scene is registered and named."""
-    from .scenes.base import REGISTRY, resolve_scene
+    from .scenes import REGISTRY, resolve_scene
 
     if text in REGISTRY or not text.endswith((".py", ".toml")) and ".py:" not in text:
         return text  # bench names the unknown ones with the built-in scenes

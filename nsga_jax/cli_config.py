@@ -38,8 +38,7 @@ def config_command(args: argparse.Namespace) -> int:
     if args.scene is None:
         raise ConfigError("config expects a scene name, a system file, a .py scene file or a .toml config "
                           "(or --list for the packaged ones)")
-    from .scenes import REGISTRY
-    from .scenes.base import resolve_scene
+    from .scenes import REGISTRY, resolve_scene
 
     name, path = resolve_scene(args.scene)
     if path is not None:
@@ -60,7 +59,7 @@ def _config_text(path: Path) -> str:
     """A config file's text, a relative scene file in it (read relative to the
     config's folder) named by its absolute path instead."""
     from .packaged import SUFFIXES
-    from .scenes.base import read_toml
+    from .scenes import read_toml
 
     text = path.read_text()
     file, colon, chosen = str(read_toml(path).get("scene", "")).partition(".py:")

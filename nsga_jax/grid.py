@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .results import ConfigError
-from .scenes.base import Configured, Scene, configure
+from .scenes import Configured, Scene, configure
 
 
 def parse_values(name: str, text: str) -> np.ndarray:

@@ -40,7 +40,7 @@ from .fit_steps import (
     to_values,
 )
 from .results import ConfigError
-from .scenes.base import load_scene, make_scheme, parametrize
+from .scenes import load_scene, make_scheme, parametrize
 from .validation import integer, require_instance
 
 OPTIMIZERS = ("lbfgs", "adam")
@@ -302,7 +302,7 @@ def write_identification(result: Identification, data: Data, out_dir, title: str
     ``fit.png`` (data, initial and fitted observables against t [s]); returns
     the paths.
 
-    ``scene`` (the :class:`~nsga_jax.scenes.base.Scene` that was fitted, or a
+    ``scene`` (the :class:`~nsga_jax.scenes.Scene` that was fitted, or a
     scene name) gives the observables' units and the figures' titles (scene,
     scheme, h); ``title`` replaces the default second line of the titles
     (``identification of ...``)."""

@@ -65,7 +65,7 @@ def write_run(sol: Solution, out_dir: Path, info: dict[str, Any], *, plots: bool
 
 def default_observables(sol: Solution, scene=None) -> list[str]:
     """The observables a run's plot shows: the scene's ``plotted`` selection
-    (:class:`~nsga_jax.scenes.base.SceneSpec`), else every scalar one."""
+    (:class:`~nsga_jax.scenes.SceneSpec`), else every scalar one."""
     scalar = [k for k, v in sol.observables.items() if np.ndim(v) == 1]
     spec = plotting.scene_spec(scene)
     chosen = [k for k in (spec.plotted if spec is not None else ()) if k in scalar]
@@ -81,7 +81,7 @@ def plot_observables(sol: Solution, path: Path, scene: str = "", *, scheme: str 
                      names: list[str] | tuple[str, ...] | None = None) -> Path:
     """``observables.png``: one panel per observable against t [s], each
     labelled with its unit (:attr:`SceneSpec.units
-    <nsga_jax.scenes.base.SceneSpec.units>`); a red line marks the first
+    <nsga_jax.scenes.SceneSpec.units>`); a red line marks the first
     failed step.
 
     Args:

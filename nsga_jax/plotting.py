@@ -13,7 +13,7 @@ so a caller (a test, a notebook) can inspect what was written::
 
 Axis labels read ``quantity [unit]`` (``[-]`` for a dimensionless quantity);
 counts (iterations, linear solves) are labelled by what they count. Units come
-from the scene: :attr:`SceneSpec.units <nsga_jax.scenes.base.SceneSpec.units>`
+from the scene: :attr:`SceneSpec.units <nsga_jax.scenes.SceneSpec.units>`
 for observables, the :class:`~nsga_jax.scenes.params.Param` units for
 parameters.
 """
@@ -131,9 +131,9 @@ def capture() -> Iterator[dict[Path, Any]]:
 
 
 def scene_spec(scene):
-    """The :class:`~nsga_jax.scenes.base.SceneSpec` of a scene name, a
-    :class:`~nsga_jax.scenes.base.Scene` or a spec; ``None`` if unknown."""
-    from .scenes.base import REGISTRY
+    """The :class:`~nsga_jax.scenes.SceneSpec` of a scene name, a
+    :class:`~nsga_jax.scenes.Scene` or a spec; ``None`` if unknown."""
+    from .scenes import REGISTRY
 
     if scene is None or scene == "":
         return None
@@ -149,7 +149,7 @@ def _agreed(values: set[str]) -> str | None:
 def observable_unit(scene, name: str) -> str | None:
     """The unit of observable ``name`` of ``scene`` (``""``: dimensionless);
     without a known scene, the unit every built-in scene agrees on, else ``None``."""
-    from .scenes.base import REGISTRY
+    from .scenes import REGISTRY
 
     spec = scene_spec(scene)
     if spec is not None and name in spec.units:
@@ -160,7 +160,7 @@ def observable_unit(scene, name: str) -> str | None:
 def parameter_unit(scene, name: str) -> str | None:
     """The unit of a swept value: ``"s"`` for ``h``, else the scene parameter's
     (or the one every built-in scene agrees on); ``None`` if unknown."""
-    from .scenes.base import REGISTRY
+    from .scenes import REGISTRY
 
     if name == "h":
         return "s"

@@ -25,7 +25,7 @@ from .first_step import LIMIT_SECONDS
 from .metrics import observed_order, relative_l1_error
 from .results import ConfigError
 from .saveat import SaveAt
-from .scenes.base import Scene, load_scene
+from .scenes import Scene, load_scene
 from .solution import Solution
 from .tables import write_csv
 from .validation import step_count

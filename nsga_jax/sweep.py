@@ -41,7 +41,7 @@ from .metrics import l1_errors
 from .monitors import RunTotals
 from .precision import cast_floats
 from .results import ConfigError
-from .scenes.base import configure
+from .scenes import configure
 from .solution import Solution, float64_view
 from .sweep_checks import check_batches
 from .tables import read_csv, write_csv
@@ -355,7 +355,7 @@ def _progress(done: int, total: int, members_done: int, members: int, elapsed: f
 def summary_columns(result: SweepResult, scene=None) -> list[str]:
     """The columns :func:`plot_sweep` shows: errors, solves per step,
     penetration and the final values of the first four observables of the
-    scene's plotted selection (:class:`~nsga_jax.scenes.base.SceneSpec`
+    scene's plotted selection (:class:`~nsga_jax.scenes.SceneSpec`
     ``plotted``; without a scene, the first four)."""
     from .plotting import scene_spec
 

@@ -56,7 +56,7 @@ def scene_registry():
     """The scenes a test registers (system files, scene files) stay out of the
     other tests' registry: it is restored after the test."""
     from nsga_jax.scenes import REGISTRY
-    from nsga_jax.scenes.base import _SCENE_FILES
+    from nsga_jax.scenes.files import _SCENE_FILES
 
     before, files = dict(REGISTRY), dict(_SCENE_FILES)
     yield REGISTRY

@@ -133,3 +133,71 @@ def test_the_private_name_checker_sees_them():
     assert private_names_imported("from ..precision import _hidden, precision\n", "nsga_jax.integrators.ds") == [
         "nsga_jax.precision._hidden"]
     assert private_names_imported("from . import _custom_types\n", "nsga_jax.solution") == []
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (at the top or inside a
+    function; not under TYPE_CHECKING). ``from .x import name`` counts as an
+    import of module ``x``; a package's own ``__init__`` reached only as the
+    parent of a submodule does not count, nor does the root ``nsga_jax``
+    (it loads its names lazily, on first use)."""
+    modules = {module_name(p): p for p in SOURCES}
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for module, path in modules.items():
+        for _, target in imports_of(path.read_text(), module, path.name == "__init__.py"):
+            while target not in modules and "." in target:
+                target = target.rsplit(".", 1)[0]  # a name imported from a module
+            if target in modules and target not in (module, "nsga_jax"):
+                graph[module].add(target)
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan),
+    each sorted: every import cycle lies in one of them."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for nxt in sorted(graph.get(node, ())):
+            if nxt not in index:
+                visit(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in on_stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def test_no_import_cycles():
+    """No module imports, directly or through others, a module that imports
+    it back, even lazily inside a function: the package is a tree of
+    dependencies that can be read from the bottom up."""
+    assert cycles(import_graph()) == []
+
+
+def test_the_cycle_checker_sees_cycles():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set(), "e": {"f"}, "f": {"e"}}
+    assert cycles(graph) == [["a", "b", "c"], ["e", "f"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+    graph = import_graph()
+    assert "nsga_jax.scenes.spec" in graph["nsga_jax.scenes.system_file"]  # `from .spec import ...` is seen

@@ -23,7 +23,7 @@ import pytest
 
 import nsga_jax as nj
 from nsga_jax.exact import bouncing_ball, rigid_pendulum
-from nsga_jax.scenes.base import parametrize
+from nsga_jax.scenes import parametrize
 
 pytestmark = pytest.mark.slow
 

@@ -15,7 +15,7 @@ import pytest
 import nsga_jax
 from nsga_jax.cli import main
 from nsga_jax.monitors import ENERGETIC_HINT, ENERGY_WARNING, RunTotals, default_tolerances, invariant_warnings
-from nsga_jax.scenes.base import load_scene, make_scheme
+from nsga_jax.scenes import load_scene, make_scheme
 from nsga_jax.system import Gravity, PlaneContact, RigidBody2D, System
 
 H = 1e-4

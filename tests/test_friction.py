@@ -17,7 +17,7 @@ import pytest
 
 import nsga_jax
 from nsga_jax.elements.rigid_body import box_inertia, box_vertices
-from nsga_jax.scenes.base import load_scene
+from nsga_jax.scenes import load_scene
 from nsga_jax.system import Gravity, PlaneContact, PointMass, RigidBody2D, RigidBody3D, SphereContact, System
 
 G, MU, V0 = 9.81, 0.3, 2.0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax.scenes.base import load_scene, make_scheme, parametrize
+from nsga_jax.scenes import load_scene, make_scheme, parametrize
 
 FD_STEP = 1e-6  # relative
 

@@ -21,7 +21,7 @@ from nsga_jax.integrators.iteration_matrix import Held
 from nsga_jax.integrators.krylov import KrylovConstant, KrylovFresh, KrylovHeld, KrylovOperator
 from nsga_jax.integrators.linalg import Factorisation, solve_bordered
 from nsga_jax.memory import dense_matrices, estimate_run_bytes
-from nsga_jax.scenes.base import load_scene
+from nsga_jax.scenes import load_scene
 
 CUBE = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43}
 """The cube landing flat within the window: every sub-problem runs."""
@@ -195,7 +195,7 @@ def test_float32_run_matches_float64_dense():
 
 def landing_loss(scheme, adjoint, steps=8):
     """The mean square vertical velocity of the nodes after the landing, as a function of (E, v0)."""
-    from nsga_jax.scenes.base import parametrize
+    from nsga_jax.scenes import parametrize
 
     params, build = parametrize("flexible_cube", {**CUBE, "divisions": 2}, ["E", "velocity"])
 

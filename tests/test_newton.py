@@ -13,7 +13,7 @@ import nsga_jax
 from nsga_jax import simulate
 from nsga_jax.integrators.linalg import Factorisation
 from nsga_jax.integrators.newton import Problem, Residual, newton, where_needed
-from nsga_jax.scenes.base import REGISTRY, load_scene, make_scheme, parametrize
+from nsga_jax.scenes import REGISTRY, load_scene, make_scheme, parametrize
 
 N = 6
 A, RHS = spd_system(N, seed=3)

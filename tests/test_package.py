@@ -23,7 +23,7 @@ import pytest
 from nsga_jax.cli import main
 from nsga_jax.packaged import ROOT as PACKAGE
 from nsga_jax.packaged import locate, packaged, packaged_files
-from nsga_jax.scenes.base import configure, resolve_scene
+from nsga_jax.scenes import configure, resolve_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

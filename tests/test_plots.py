@@ -18,7 +18,7 @@ import nsga_jax
 from nsga_jax import plotting
 from nsga_jax.identify import Data, Identification, write_identification
 from nsga_jax.output import plot_iterations, plot_observables, summary, write_run
-from nsga_jax.scenes.base import REGISTRY
+from nsga_jax.scenes import REGISTRY
 from nsga_jax.studies import Reference, StudyRow, write_study
 from nsga_jax.sweep import SweepResult, plot_sweep
 

@@ -15,8 +15,7 @@ from nsga_jax.elements.hex8 import structured_hex_mesh
 from nsga_jax.models.bar import ElasticBar
 from nsga_jax.models.beam2d import PlanarBeam
 from nsga_jax.models.solid import HexSolid as HexModel
-from nsga_jax.scenes import load_scene
-from nsga_jax.scenes.base import parametrize
+from nsga_jax.scenes import load_scene, parametrize
 from nsga_jax.system import Bar, Beam2D, HexSolid, PlaneContact, System
 
 # ------------------------------------------------ the hand-written models

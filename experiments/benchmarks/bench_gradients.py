@@ -35,7 +35,7 @@ def measure(n_steps: int, mode: str, repeat: int) -> dict:
     import jax.numpy as jnp
 
     import nsga_jax
-    from nsga_jax.scenes.base import parametrize
+    from nsga_jax.scenes import parametrize
 
     params, build = parametrize("impacting_bar", {"h": 1e-3}, ["E", "velocity"])
 

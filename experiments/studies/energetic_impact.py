@@ -101,7 +101,7 @@ def main(box: bool) -> None:
         rows.append((name, scheme, e, dn, de, vn, ve, float(np.max(np.abs(ve - vn)))))
         print(rows[-1], flush=True)
     if box:
-        from nsga_jax.scenes.base import load_scene
+        from nsga_jax.scenes import load_scene
 
         change = {}
         for law in ("newton", "energetic"):

@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 import nsga_jax  # noqa: E402
 from nsga_jax import plotting  # noqa: E402
 from nsga_jax.exact import bouncing_ball  # noqa: E402
-from nsga_jax.scenes.base import parametrize  # noqa: E402
+from nsga_jax.scenes import parametrize  # noqa: E402
 
 T_END, E_TRUE, G, H0 = 1.5, 0.8, 9.81, 1.0
 T_DATA = np.arange(0.0, T_END + 1e-12, 0.01)

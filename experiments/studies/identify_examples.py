@@ -91,8 +91,7 @@ def bar_checks() -> dict:
     import jax.numpy as jnp
 
     from nsga_jax import integrate
-    from nsga_jax.scenes import load_scene, parametrize
-    from nsga_jax.scenes.base import make_scheme
+    from nsga_jax.scenes import load_scene, make_scheme, parametrize
 
     scene, overrides, observables, every, true, initial, _ = CASES["bar"]
     params, build = parametrize(scene, overrides, ["E", "e"])

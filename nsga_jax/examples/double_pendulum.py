@@ -65,8 +65,7 @@ import jax
 import jax.numpy as jnp
 
 import nsga_jax
-from nsga_jax.scenes import Param, SceneSpec
-from nsga_jax.scenes.base import register
+from nsga_jax.scenes import Param, SceneSpec, register
 from nsga_jax.validation import POSITIVE, UNIT_INTERVAL, Range
 
 

@@ -17,9 +17,9 @@ so the exact z(t), vz(t) hold in both cases."""
 from __future__ import annotations
 
 from ..exact import bouncing_ball
-from .base import SceneSpec, register
 from .friction_forces import friction_force
 from .params import Param, contact_mu, friction_coefficient, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "mass": positive(1.0, "mass of the ball", "kg"),

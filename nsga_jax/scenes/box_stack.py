@@ -22,8 +22,8 @@ falling box does not collide with the sides of the others.
 
 from __future__ import annotations
 
-from .base import SceneSpec, register
 from .params import Param, contact_mu, friction_coefficient, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "n_boxes": Param(3, "number of boxes in the stack", kind="int", lo=1, hi=50),

@@ -23,8 +23,8 @@ from __future__ import annotations
 import math
 
 from ..results import ConfigError
-from .base import SceneSpec, register
 from .params import Param, nonnegative, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "hub_radius": positive(0.2, "hub radius R: the clamp is on the rim", "m"),

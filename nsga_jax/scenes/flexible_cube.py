@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from ..results import ConfigError
-from .base import SceneSpec, register
 from .friction_forces import friction_force
 from .params import Param, contact_mu, friction_coefficient, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "side": positive(0.1, "side of the cube", "m"),

@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 
 from ..results import ConfigError
-from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "length": positive(1.0, "beam length", "m"),

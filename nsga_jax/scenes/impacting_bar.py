@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from ..results import ConfigError
-from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "E": positive(900.0, "Young's modulus", "Pa"),

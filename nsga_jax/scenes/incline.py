@@ -22,10 +22,10 @@ import numpy as np
 
 from ..exact import incline
 from ..results import ConfigError
-from .base import SceneSpec, register
 from .block import block_on_line
 from .friction_forces import friction_force
 from .params import Param, contact_mu, friction_coefficient, positive
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "mass": positive(1.0, "mass of the block", "kg"),

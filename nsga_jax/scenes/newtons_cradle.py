@@ -14,8 +14,8 @@ stop. The exact solution is that sequence of binary collisions
 from __future__ import annotations
 
 from ..exact import newtons_cradle
-from .base import SceneSpec, register
 from .params import Param, positive, unit_interval
+from .spec import SceneSpec, register
 
 MAX_BALLS = 10
 """The most balls a cradle has (its observables are named for each ball)."""

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..results import ConfigError
-from .base import SceneSpec, register
 from .friction_forces import friction_force
 from .params import Param, contact_mu, friction_coefficient, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "mass": positive(46.8, "mass of the box", "kg"),

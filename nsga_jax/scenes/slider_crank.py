@@ -24,8 +24,8 @@ from __future__ import annotations
 import math
 
 from ..results import ConfigError
-from .base import SceneSpec, register
 from .params import Param, nonnegative, positive, unit_interval
+from .spec import SceneSpec, register
 
 PARAMETERS = {
     "crank_length": positive(0.15, "crank length, pivot to the rod's pin", "m"),

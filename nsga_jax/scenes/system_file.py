@@ -47,7 +47,8 @@ from pathlib import Path
 from typing import Any
 
 from ..results import ConfigError
-from .base import REGISTRY, SceneSpec, read_toml, register
+from .files import read_toml
+from .spec import REGISTRY, SceneSpec, register
 from .system_observables import observable_units, observables_of
 from .system_parse import build_system, component_paths, numbers, parse_system
 
