@@ -4,29 +4,18 @@ Importing the package is cheap: the numerical modules (and JAX) load when a
 name that needs them is first used (``nsga_jax.simulate``, ``nsga_jax.DS``,
 ...), so that the command line answers ``--help`` and input errors at once.
 
-Side effects, both documented in docs/python-api.md:
-
-- **float64.** When the numerical modules load, they turn on JAX's
-  ``jax_enable_x64``: the schemes' Newton tolerances and constraint checks are
-  meant for double precision. Set the environment variable
-  ``NSGA_JAX_X64=0`` before the first use to leave JAX's setting alone (runs
-  then need ``dtype="float32"``, or x64 enabled by the caller).
-- **XLA flags.** ``import nsga_jax`` adds
-  ``--xla_cpu_enable_concurrency_optimized_scheduler=false`` to ``XLA_FLAGS``
-  (unless the user set that flag): with jaxlib 0.10 a program that vmaps
-  dense solves over step sizes deadlocked on its second execution without
-  it. It only takes effect if nsga_jax is imported before JAX runs its first
-  computation; set the flag yourself in ``XLA_FLAGS`` to choose otherwise.
+Importing it changes nothing outside it: no JAX option, no environment
+variable. Runs are float64 by default, which needs JAX's 64-bit mode on:
+call ``jax.config.update("jax_enable_x64", True)`` once, at the top of the
+program, before building models (or set ``JAX_ENABLE_X64=1``). A float64 run
+with the mode off is refused by name (:class:`ConfigError`), never computed
+in float32; ``dtype="float32"`` runs either way. The command line
+(``nsga-jax``) turns the mode on for its own process.
 """
 
 import importlib
-import os
 
-_FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler"
-if _FLAG not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + f" {_FLAG}=false").strip()
-
-from .results import ConfigError, ConvergenceError, InvariantError  # noqa: E402  (no JAX)
+from .results import ConfigError, ConvergenceError, InvariantError  # (no JAX)
 
 __version__ = "0.1.0"
 

@@ -42,6 +42,7 @@ from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template
 from .memory import check_fits
 from .models.base import Model
+from .precision import require_x64_for_inputs
 from .results import RESULTS, ConfigError, from_code
 from .run_inputs import check_scheme
 from .saveat import HOST_ONLY, SaveAt, refuse
@@ -162,6 +163,7 @@ def integrate(
         if np.shape(x) != (model.n_dof,):  # numpy's shape: lists too, and tracers by their .shape
             raise ConfigError(f"{name} must have shape ({model.n_dof},), got {np.shape(x)}")
     refuse_without_implicit_adjoint(scheme)
+    require_x64_for_inputs(q0=q0, v0=v0)  # float64 NumPy inputs are not rounded to float32 silently
     dtype = jnp.result_type(*(jnp.asarray(x) for x in (q0, v0)), float)  # the precision of q0 and v0
     check_fits(model, scheme, dtype.itemsize)  # the dense matrices of one run (static sizes; a vmap's are not seen)
     check_first_step(model, scheme, np.dtype(dtype).name, limit=first_step_limit)

@@ -4,9 +4,11 @@ A run computes in the precision of what it is given: :func:`cast_floats` casts
 the model's and the scheme's floating-point leaves, and the callers cast q0, v0,
 h and t0, to the run's dtype; every array the schemes and models create takes
 its dtype from these (``q.dtype``, ``h.dtype``, a leaf's dtype) or is a Python
-number (weakly typed). ``jax_enable_x64`` stays on throughout, so a float32 run
-neither changes JAX's configuration nor clears its caches: its programs are
-cached like any other, keyed on the float32 shapes of their arguments.
+number (weakly typed). A float32 run never touches JAX's configuration nor clears
+its caches: its programs are cached like any other, keyed on the float32
+shapes of their arguments. A float64 run needs JAX's 64-bit mode
+(``jax_enable_x64``), which the caller turns on: :func:`require_x64_for`
+refuses one without it, by name, before anything is traced.
 """
 
 from __future__ import annotations
@@ -23,13 +25,36 @@ from .results import ConfigError
 DTYPES = ("float64", "float32")
 
 
-def require_x64_for(dtype: str) -> None:
-    """Refuse a float64 run while ``jax_enable_x64`` is off (set so by the
-    caller or ``NSGA_JAX_X64=0``): JAX would then make its arrays float32."""
+X64_CALL = ('call jax.config.update("jax_enable_x64", True) at the top of the program, before building models '
+            '(or set JAX_ENABLE_X64=1)')
+
+
+def x64_enabled() -> bool:
+    """Whether JAX's 64-bit mode is on (nsga_jax never turns it on itself)."""
     # JAX's Config defines its options as attributes at run time: none is declared to mypy
-    if dtype == "float64" and not jax.config.jax_enable_x64:  # type: ignore[attr-defined]
-        raise ConfigError('dtype="float64" needs jax_enable_x64 on (jax.config.update("jax_enable_x64", True)); '
-                          'or run with dtype="float32"')
+    return bool(jax.config.jax_enable_x64)  # type: ignore[attr-defined]
+
+
+def require_x64_for(dtype: str) -> None:
+    """Refuse a float64 run while JAX's 64-bit mode is off: JAX would then
+    make its arrays float32, and the run would not be what was asked."""
+    if dtype == "float64" and not x64_enabled():
+        raise ConfigError(f'dtype="float64" (the default) needs JAX\'s 64-bit mode, which is off: '
+                          f'{X64_CALL}; or run with dtype="float32"')
+
+
+def require_x64_for_inputs(**inputs) -> None:
+    """Refuse float64 inputs (NumPy arrays, Python lists) while JAX's 64-bit
+    mode is off, naming the first: JAX would silently round them to float32.
+    JAX arrays and tracers carry their own precision and pass."""
+    if x64_enabled():
+        return
+    for name, value in inputs.items():
+        if isinstance(value, jax.Array) or value is None:
+            continue
+        if np.asarray(value).dtype == np.float64:
+            raise ConfigError(f"{name} is float64 but JAX's 64-bit mode is off, so it would be rounded to float32: "
+                              f"{X64_CALL}, or pass float32 arrays")
 
 
 _Tree = TypeVar("_Tree")

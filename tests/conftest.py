@@ -4,10 +4,9 @@ import jax
 import numpy as np
 import pytest
 
-import nsga_jax  # noqa: F401  (turns on float64)
 from nsga_jax.compilation_cache import ENV
 
-jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_enable_x64", True)  # float64 runs need it; importing nsga_jax leaves it to its caller
 
 QUICK_COMPILE = "--xla_backend_optimization_level=0"
 

@@ -148,6 +148,7 @@ def test_simulate_batch_returns_one_solution_per_step_size():
 
 SHARDED = """
 import jax, jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 import nsga_jax as nj
 assert len(jax.devices()) == 2

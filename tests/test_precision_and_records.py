@@ -1,6 +1,9 @@
 """float32 runs, and strided records for long runs (statistics over every step)."""
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -118,6 +121,45 @@ def test_float64_run_refused_with_x64_off():
     scene = load_scene("bouncing_ball", {"t_end": 0.01})
     with jax.enable_x64(False), pytest.raises(nj.ConfigError, match="jax_enable_x64"):
         scene.run(dtype="float64")
+
+
+def test_float64_inputs_refused_by_integrate_with_x64_off():
+    """integrate takes its precision from q0 and v0: float64 NumPy inputs
+    with the 64-bit mode off would be rounded to float32 silently, so they
+    are refused by name; float32 JAX arrays run in float32."""
+    import jax
+    import jax.numpy as jnp
+
+    ball = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+    with jax.enable_x64(False):
+        with pytest.raises(nj.ConfigError, match="q0 is float64 but JAX's 64-bit mode is off"):
+            nj.integrate(ball, nj.DS(), 0.0, 0.01, 1e-3, np.array([1.0]), np.array([0.0]))
+        with pytest.raises(nj.ConfigError, match='dtype="float64"'):
+            nj.simulate_batch(ball, nj.DS(), 0.0, 0.01, [1e-3], [1.0], [0.0])
+        sol = nj.integrate(ball, nj.DS(tol_r=1e-5), 0.0, 0.01, 1e-3, jnp.array([1.0]), jnp.array([0.0]))
+    assert sol.q.dtype == jnp.float32 and int(sol.result) == 0
+
+
+def test_importing_nsga_jax_changes_no_global_state():
+    """A fresh process: importing the package and its numerical modules, and
+    building a scene, leaves JAX's 64-bit mode and XLA_FLAGS as they were;
+    a float64 run is then refused by name, and runs once the caller turns
+    the mode on."""
+    code = (
+        "import os, jax\n"
+        "before = (jax.config.jax_enable_x64, os.environ.get('XLA_FLAGS'))\n"
+        "import nsga_jax as nj, nsga_jax._simulate, nsga_jax.batch, nsga_jax.system, nsga_jax.scenes\n"
+        "scene = nsga_jax.scenes.load_scene('bouncing_ball', {'t_end': 0.01})\n"
+        "assert (jax.config.jax_enable_x64, os.environ.get('XLA_FLAGS')) == before == (False, None), before\n"
+        "try:\n    scene.run()\nexcept nj.ConfigError as err:\n    print('refused:', err)\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        "scene = nsga_jax.scenes.load_scene('bouncing_ball', {'t_end': 0.01})\n"
+        "print('ran', scene.run().q.dtype)\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_ENABLE_X64")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "refused: dtype=\"float64\" (the default) needs JAX's 64-bit mode" in out.stdout
+    assert "ran float64" in out.stdout
 
 
 def test_runs_of_either_precision_do_not_leak_into_each_other():

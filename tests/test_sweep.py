@@ -114,6 +114,8 @@ def test_rigid_box_sweep_equals_single_runs():
 
 KILLED_SWEEP = """
 import os, signal
+import jax
+jax.config.update("jax_enable_x64", True)
 from nsga_jax.sweep import sweep
 
 def kill_after_first(k, rows):
@@ -146,6 +148,7 @@ def test_killed_sweep_resumes_to_the_same_table(tmp_path):
 
 SHARDED_SWEEP = """
 import jax
+jax.config.update("jax_enable_x64", True)
 from nsga_jax.batch import needs_bounded_lapack_batches, member_mesh
 from nsga_jax.sweep import sweep
 assert len(jax.devices()) == 2, jax.devices()

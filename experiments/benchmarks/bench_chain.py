@@ -20,6 +20,10 @@ import time
 from datetime import date
 from pathlib import Path
 
+import jax
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 
 def chain(n_links: int, length: float = 0.2, mass: float = 0.5):
     """``(model, q0, v0)`` of the chain: link i's centre at ((i + 1/2) L, 0)."""

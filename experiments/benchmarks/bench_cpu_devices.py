@@ -25,6 +25,7 @@ import sys
 MEASURE = r"""
 import json, sys
 import jax
+jax.config.update("jax_enable_x64", True)
 import numpy as np
 from nsga_jax.batch import BatchRun, broadcast_members, member_mesh
 from nsga_jax.bench import _bench_scene

@@ -19,6 +19,8 @@ import nsga_jax  # noqa: E402
 from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.scenes import parametrize  # noqa: E402
 
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 H, N = 1e-3, 1500
 
 

@@ -21,6 +21,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jax
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 RESULTS = Path("docs/results/gradients")

@@ -39,6 +39,8 @@ from nsga_jax.bench import per_call  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 from nsga_jax.tables import write_csv  # noqa: E402
 
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 # the package's benchmark cases, with the cube at the paper's middle step over its impact window
 CASES = {**BENCH_CASES, "flexible_cube": {**BENCH_CASES["flexible_cube"], "h": 3e-5}}
 

@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import argparse
 
+import jax
 import numpy as np
 
 from nsga_jax.exact import rocking_impact_times
 from nsga_jax.scenes import load_scene
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
 
 RESOLVABLE = 10
 """Steps between two impacts of the exact solution for the second to count

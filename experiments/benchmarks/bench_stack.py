@@ -25,6 +25,10 @@ import time
 from datetime import date
 from pathlib import Path
 
+import jax
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 HEADER = ("| dim | boxes | case | t_end [s] | failed steps | drift [m] | position its. mean / max | "
           "velocity its. mean / max | max penetration [m] | final speed [m/s] | wall [s] |")
 

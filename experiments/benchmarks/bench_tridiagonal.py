@@ -23,6 +23,8 @@ from nsga_jax.bench import per_call  # noqa: E402
 from nsga_jax.integrators.linalg import Tridiagonal, band_matrix  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 
 def lapack(band, rhs):
     return jax.lax.linalg.tridiagonal_solve(band[0], band[1], band[2], rhs[:, None])[:, 0]

@@ -49,6 +49,8 @@ from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.exact import bouncing_ball, rigid_pendulum  # noqa: E402
 from nsga_jax.scenes import load_scene, parametrize  # noqa: E402
 
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 G = 9.81
 HS = (1e-3, 3e-4, 1e-4)
 RESULTS = Path("docs/results/event_gradients")

@@ -26,11 +26,14 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import jax  # noqa: E402
+
 import nsga_jax as nj  # noqa: E402
 from nsga_jax.identify import Data, identify, synthetic_data, write_identification  # noqa: E402
-
-ADJOINT = nj.ImpactTimeAdjoint()  # the adjoint of the committed table (recorded in commit 4670a9a)
 from nsga_jax.scenes import load_scene  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+ADJOINT = nj.ImpactTimeAdjoint()  # the adjoint of the committed table (recorded in commit 4670a9a)
 
 FIGURES = Path("docs/figures")
 RESULTS = Path("docs/results/identification")

@@ -16,7 +16,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jax
+
 from nsga_jax.tables import write_csv
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
 
 CHILD = """
 import json, resource

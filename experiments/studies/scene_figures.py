@@ -12,11 +12,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from nsga_jax import plotting
 from nsga_jax.exact_pendulums import double_pendulum, double_pendulum_energy
 from nsga_jax.scenes import load_scene
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
 
 
 def cradle_figure(out: Path) -> None:

@@ -23,6 +23,7 @@ import shutil
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from nsga_jax import plotting
@@ -30,6 +31,8 @@ from nsga_jax.metrics import relative_l1_error
 from nsga_jax.scenes import load_scene
 from nsga_jax.studies import make_reference, run_step_sizes
 from nsga_jax.tables import write_csv
+
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
 
 SCENE = "slider_crank"
 SCHEMES = ("ds", "cs")

@@ -44,6 +44,7 @@ import json, os, sys, time
 sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f)]  # import the given tree
 sys.path.insert(0, sys.argv[1])
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ["JAX_ENABLE_X64"] = "1"  # float64 (a revision that turns it on at import does too)
 import numpy as np
 from nsga_jax.bench import _bench_scene
 scene = _bench_scene(sys.argv[2], {"scheme": "ds"}, 2000)

@@ -44,6 +44,8 @@ from nsga_jax.bench import bench, markdown
 from nsga_jax.scenes import load_scene
 from nsga_jax.sweep import sweep
 
+jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+
 SWEEPS = {
     "bouncing_ball": ({"e": [0.5, 0.7, 0.8, 0.9]}, None, {"t_end": 1.0}),
     "impacting_bar": ({"e": [0.0, 0.5, 1.0]}, [1e-3, 2e-3], {"t_end": 0.4}),
