@@ -40,13 +40,13 @@ from .integrators.records import StepOutput, output_template, pack_output, packe
 from .memory import check_fits
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
-from .precision import DTYPES, cast_floats, require_x64_for
+from .precision import cast_floats
 from .progress import Progress
 from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
-from .run_inputs import check_initial_state, check_model_instance, check_scheme, redundancy_notes, state_vector
+from .run_inputs import check_run_inputs
 from .saveat import DEVICE_ONLY, SaveAt, refuse
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import choice, integer, refuse_traced, require_instance, time_grid
+from .validation import integer, require_instance
 
 # --------------------------------------------------------------------- the loop
 
@@ -175,27 +175,18 @@ def simulate(
     ``jax.grad``, ``jit`` or ``vmap`` (traced inputs) it refuses, naming
     :func:`~nsga_jax.integrate`, the pure entry point with the same arguments.
     """
-    refuse_traced("nsga_jax.simulate", model=model, scheme=scheme, t0=t0, t1=t1, h=h, q0=q0, v0=v0)
-    check_scheme(scheme)
-    check_model_instance(model)
-    dtype = choice("dtype", dtype, DTYPES)
-    require_x64_for(dtype)
-    t0, t1, h, n_steps = time_grid(t0, t1, h, dtype)
-    q0 = state_vector("q0", q0, model.n_dof)
-    v0 = state_vector("v0", v0, model.n_dof)
-    check_initial_state(model, q0, v0)
-    notes = redundancy_notes(model, q0)  # reported before the run, kept in its warnings
+    run_inputs = check_run_inputs("nsga_jax.simulate", model, scheme, t0, t1, q0, v0, dtype=dtype, h=h,
+                                  observables=observables, first_step_limit=first_step_limit)
+    dtype, t0, q0, v0, notes = run_inputs.dtype, run_inputs.t0, run_inputs.q0, run_inputs.v0, run_inputs.notes
+    h, n_steps = float(run_inputs.hs[0]), int(run_inputs.n_steps[0])
     refuse(saveat, DEVICE_ONLY, "simulate (host driver)", "nsga_jax.integrate, the pure entry point")
     record_every = saveat.every
     if chunk_size is not None:
         chunk_size = integer("chunk_size", chunk_size, 1)
     for name, value in (("throw", throw), ("progress", progress), ("strict", strict), ("check_memory", check_memory)):
         require_instance(name, value, (bool, np.bool_), "True or False")
-    if first_step_limit is not None:
-        require_instance("first_step_limit", first_step_limit, (int, float, np.floating), "a number of seconds or None")
-    for name, hook in (("on_chunk", on_chunk), ("observables", observables)):
-        if hook is not None and not callable(hook):
-            raise TypeError(f"{name} must be a function or None, got {type(hook).__name__}")
+    if on_chunk is not None and not callable(on_chunk):
+        raise TypeError(f"on_chunk must be a function or None, got {type(on_chunk).__name__}")
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
     require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.monitors.Tolerances")
     template = output_template(model, np.dtype(dtype), scheme.subproblems)

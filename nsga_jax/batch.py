@@ -37,11 +37,11 @@ from .integrators.records import StepOutput, output_template, pack_output, packe
 from .memory import check_fits
 from .models.base import Model
 from .monitors import RunTotals
-from .precision import DTYPES, cast_floats, require_x64_for
+from .precision import cast_floats
 from .results import ConfigError, Result
-from .run_inputs import check_initial_state, check_model_instance, check_scheme, redundancy_notes, state_vector
+from .run_inputs import check_run_inputs
 from .solution import Observables, Solution, host_solution, with_observables
-from .validation import choice, describe, refuse_traced, require_instance, time_grid
+from .validation import require_instance
 
 MEMBERS = "members"
 """Name of the mesh axis the members are split over."""
@@ -333,23 +333,12 @@ def simulate_batch(
     above it (:func:`~nsga_jax.first_step.check_first_step`;
     ``None`` runs anyway).
     """
-    refuse_traced("nsga_jax.simulate_batch", model=model, scheme=scheme, t0=t0, t1=t1, hs=hs, q0=q0, v0=v0)
-    check_scheme(scheme)
-    check_model_instance(model)
-    dtype = choice("dtype", dtype, DTYPES)
-    require_x64_for(dtype)
-    hs = np.atleast_1d(np.asarray(hs, dtype=float)) if not isinstance(hs, (str, bytes)) else hs
-    if isinstance(hs, (str, bytes)) or hs.ndim != 1 or hs.size == 0:
-        raise TypeError(f"hs must be a non-empty sequence of step sizes, got {describe(hs)}")
-    grids = [time_grid(t0, t1, h, dtype) for h in hs]
-    t0, t1 = grids[0][0], grids[0][1]
-    q0 = state_vector("q0", q0, model.n_dof)
-    v0 = state_vector("v0", v0, model.n_dof)
-    check_initial_state(model, q0, v0)
-    notes = redundancy_notes(model, q0)  # warned before the batch runs, kept in each member's warnings
+    run_inputs = check_run_inputs("nsga_jax.simulate_batch", model, scheme, t0, t1, q0, v0, dtype=dtype, hs=hs,
+                                  observables=observables, first_step_limit=first_step_limit)
+    dtype, t0, q0, v0, notes = run_inputs.dtype, run_inputs.t0, run_inputs.q0, run_inputs.v0, run_inputs.notes
+    hs, n_steps = run_inputs.hs, run_inputs.n_steps
     if mesh is not None:
         require_instance("mesh", mesh, Mesh, "a jax.sharding.Mesh (nsga_jax.batch.member_mesh)")
-    n_steps = np.array([g[3] for g in grids])
     template = output_template(model, np.dtype(dtype), scheme.subproblems)
     check_fits(model, scheme, np.dtype(dtype).itemsize, members=len(hs), records=int(n_steps.max()),
                record_numbers=sum(packed_sizes(template)), what="the batch")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -17,8 +17,19 @@ import numpy as np
 from .integrators.base import AbstractScheme
 from .models.base import Model
 from .models.redundancy import RedundantConstraintsWarning, bilateral_redundancy, conflict
+from .precision import DTYPES, require_x64_for
 from .results import ConfigError
-from .validation import IMPACT_LAWS, check_model_fields, choice, describe, integer, real, require_instance
+from .validation import (
+    IMPACT_LAWS,
+    check_model_fields,
+    choice,
+    describe,
+    integer,
+    real,
+    refuse_traced,
+    require_instance,
+    time_grid,
+)
 
 
 def check_scheme(scheme) -> None:
@@ -90,7 +101,7 @@ def check_initial_state(model, q0: np.ndarray, v0: np.ndarray, tol: float = 1e-9
                               "start from a configuration that satisfies the joints")
 
 
-def redundancy_notes(model, q0: np.ndarray) -> list[str]:
+def redundancy_notes(model, q0: np.ndarray, stacklevel: int = 3) -> list[str]:
     """The report of redundant bilateral constraints at q0
     (:func:`~nsga_jax.models.redundancy.bilateral_redundancy`), warned
     (:class:`~nsga_jax.models.redundancy.RedundantConstraintsWarning`) before
@@ -98,7 +109,7 @@ def redundancy_notes(model, q0: np.ndarray) -> list[str]:
     redundancy = bilateral_redundancy(model, q0)
     if redundancy is None:
         return []
-    warnings.warn(redundancy.text(), RedundantConstraintsWarning, stacklevel=3)
+    warnings.warn(redundancy.text(), RedundantConstraintsWarning, stacklevel=stacklevel)
     return [redundancy.text()]
 
 
@@ -106,3 +117,61 @@ def check_model_instance(model) -> None:
     """A model instance whose fields pass :func:`check_model_fields`."""
     require_instance("model", model, Model, "a model instance (a subclass of nsga_jax.Model)")
     check_model_fields(model)
+
+
+class RunInputs(NamedTuple):
+    """A host run's inputs, checked (:func:`check_run_inputs`); one entry of
+    ``hs`` and ``n_steps`` per run (one for :func:`~nsga_jax.simulate`, one
+    per member for :func:`~nsga_jax.simulate_batch`)."""
+
+    dtype: str
+    """``"float64"`` or ``"float32"``."""
+    t0: float
+    """Start [s]."""
+    t1: float
+    """End [s]."""
+    hs: np.ndarray
+    """Step sizes [s], (runs,)."""
+    n_steps: np.ndarray
+    """Steps of each run, (runs,) int."""
+    q0: np.ndarray
+    """Initial coordinates, (n,) float64."""
+    v0: np.ndarray
+    """Initial velocities, (n,) float64."""
+    notes: list[str]
+    """The redundancy report (:func:`redundancy_notes`), kept in each run's warnings."""
+
+
+def check_run_inputs(driver: str, model, scheme, t0, t1, q0, v0, *, dtype, observables=None,
+                     first_step_limit=None, h=None, hs=None) -> RunInputs:
+    """Every check a host run makes before anything is traced, in one place
+    for :func:`~nsga_jax.simulate` (one step size ``h``) and
+    :func:`~nsga_jax.simulate_batch` (a sequence ``hs``): inputs not traced
+    (``driver`` is named in the refusal), the scheme, the model, ``dtype``
+    (and JAX's 64-bit mode for float64), the time grid of each step size,
+    the initial state (sizes, finite, joints satisfied, contacts not
+    penetrated), ``observables`` a function or ``None`` and
+    ``first_step_limit`` a number or ``None``. Redundant bilateral
+    constraints are warned about once, here. Raises :class:`TypeError` for a
+    wrong Python type and :class:`~nsga_jax.ConfigError` for a bad value."""
+    steps = {"h": h} if hs is None else {"hs": hs}
+    refuse_traced(driver, model=model, scheme=scheme, t0=t0, t1=t1, **steps, q0=q0, v0=v0)
+    check_scheme(scheme)
+    check_model_instance(model)
+    dtype = choice("dtype", dtype, DTYPES)
+    require_x64_for(dtype)
+    if hs is not None:
+        hs = np.atleast_1d(np.asarray(hs, dtype=float)) if not isinstance(hs, (str, bytes)) else hs
+        if isinstance(hs, (str, bytes)) or hs.ndim != 1 or hs.size == 0:
+            raise TypeError(f"hs must be a non-empty sequence of step sizes, got {describe(hs)}")
+    grids = [time_grid(t0, t1, step, dtype) for step in (hs if hs is not None else [h])]
+    q0 = state_vector("q0", q0, model.n_dof)
+    v0 = state_vector("v0", v0, model.n_dof)
+    check_initial_state(model, q0, v0)
+    if first_step_limit is not None:
+        require_instance("first_step_limit", first_step_limit, (int, float, np.floating), "a number of seconds or None")
+    if observables is not None and not callable(observables):
+        raise TypeError(f"observables must be a function or None, got {type(observables).__name__}")
+    notes = redundancy_notes(model, q0, stacklevel=4)  # at the caller of simulate / simulate_batch
+    return RunInputs(dtype, grids[0][0], grids[0][1], np.array([g[2] for g in grids]),
+                     np.array([g[3] for g in grids]), q0, v0, notes)

@@ -109,10 +109,16 @@ BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.5)
         ({"scheme": nj.DS(reuse_min_dof=None)}, r"reuse_min_dof must be an integer >= 0, got None"),
     ],
 )
-def test_simulate_arguments_are_checked(kwargs, match):
+@pytest.mark.parametrize("driver", ["simulate", "simulate_batch"])
+def test_simulate_arguments_are_checked(kwargs, match, driver):
+    """simulate and simulate_batch check their inputs with the same function,
+    and refuse the same inputs with the same words (a batch's step sizes ``hs``
+    one by one, as ``h``)."""
     args = {"model": BALL, "scheme": nj.DS(), "t0": 0.0, "t1": 1.0, "h": 1e-3, "q0": [1.0], "v0": [0.0]}
     args.update(kwargs)
-    refused(match, nj.simulate, **args)
+    if driver == "simulate_batch":
+        args["hs"] = [1e-3, args.pop("h")]
+    refused(match, getattr(nj, driver), **args)
 
 
 def test_bilateral_violation_at_start_is_refused():
