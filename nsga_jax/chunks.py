@@ -150,9 +150,9 @@ def chunk_length(model: Model) -> int:
     recorded numbers per chunk (4096 steps for a ball, 512 for the 201-node
     bar, 128 for the 648-dof cube, 4 from 16,384 coordinates). Progress is
     shown after each chunk and a step's time grows with n, so a large
-    model's first output comes after a few of its steps: 64, the floor
-    before, took about 2 minutes on the cube at 40 divisions. A chunk's host
-    work (its records, energies, totals) measured 10 ms at 14,739
-    coordinates, within the noise of a 0.1 s step (docs/performance.md)."""
+    model's first output comes after a few of its steps, and a chunk's host
+    work (its records, energies, totals) stays within the noise of a step
+    (both measured in docs/performance.md, *The first minute of a large
+    run*)."""
     fit = 2**18 // (2 * model.n_dof + 16)
     return int(min(4096, max(4, 2 ** int(math.floor(math.log2(max(fit, 1)))))))

@@ -73,9 +73,8 @@ def svk_energy(x_e: jax.Array, p) -> jax.Array:
 def hex8_internal_force(x_e: jax.Array, v_e: jax.Array, p) -> jax.Array:
     """Internal force (24,) = -dU/dx_e [N] of :func:`svk_energy`, in closed
     form: f_a = -Σ_gp dV F S ∇N_a (the first Piola–Kirchhoff stress F S on
-    the shape-function gradients): 8.1 against 11.6 ms by ``jax.grad`` of the
-    energy for 8,000 elements on a 2-core CPU
-    (``experiments/benchmarks/bench_large_kernels.py``)."""
+    the shape-function gradients), faster than ``jax.grad`` of the energy
+    (measured in docs/performance.md, *Cost and memory against size*)."""
     dNdX, dV = p[0], p[1]
     F, _, S = _deformation(x_e, p)
     P = jnp.einsum("gij,gjk->gik", F, S) * dV[:, None, None]
@@ -90,9 +89,9 @@ def hex8_stiffness(x_e: jax.Array, p) -> jax.Array:
         K[a i, b k] = Σ_gp dV (δ_ik ∇N_a·S ∇N_b + λ g_ai g_bk + μ (F Fᵀ)_ik ∇N_a·∇N_b + μ g_bi g_ak),
 
     the geometric and the material parts. The same matrix as ``jax.jacfwd``
-    of :func:`hex8_internal_force`, in a fraction of its time (3.4 against
-    56 ms for 1,000 elements on a 2-core CPU,
-    ``experiments/benchmarks/bench_large_kernels.py``)."""
+    of :func:`hex8_internal_force`, in a fraction of its time
+    (``experiments/benchmarks/bench_large_kernels.py``, its table in
+    docs/results/bench/large_kernels.md)."""
     dNdX, dV, lam, mu, _ = p
     F, _, S = _deformation(x_e, p)
     g = jnp.einsum("gij,gaj->gai", F, dNdX)  # F ∇N_a

@@ -59,12 +59,10 @@ KAPPA = 0.1
 KRYLOV_MIN_DOF: int | None = 500
 """The size from which DS solves a matrix-free model without assembling
 (:attr:`~nsga_jax.integrators.ds.DS.krylov_min_dof`), between the sizes
-where the paths measured even and where the matrix-free one is faster: on
-the flexible cube landing (``experiments/benchmarks/bench_krylov.py``,
-2-core CPU, float64) the dense path is faster at 192 coordinates (3.3
-against 4.3 ms a step), the two are even at 375 (5.4 and 5.3 ms), and the
-matrix-free one is faster from 648 on (10.2 against 5.6 ms at the paper's
-cube, 0.076 against 0.0086 s at 1,536)."""
+where the dense and matrix-free paths measured even and where the
+matrix-free one is faster, on the flexible cube landing
+(``experiments/benchmarks/bench_krylov.py``; the table and the switch
+point are in docs/performance.md, *Cost and memory against size*)."""
 
 MAX_FORCING = 0.1
 """The loosest relative residual of a linear solve (the first updates of a
