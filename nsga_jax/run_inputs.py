@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .first_step import check_limit
 from .integrators.base import AbstractScheme
 from .models.base import Model
 from .models.redundancy import RedundantConstraintsWarning, bilateral_redundancy, conflict
@@ -168,8 +169,7 @@ def check_run_inputs(driver: str, model, scheme, t0, t1, q0, v0, *, dtype, obser
     q0 = state_vector("q0", q0, model.n_dof)
     v0 = state_vector("v0", v0, model.n_dof)
     check_initial_state(model, q0, v0)
-    if first_step_limit is not None:
-        require_instance("first_step_limit", first_step_limit, (int, float, np.floating), "a number of seconds or None")
+    check_limit("first_step_limit", first_step_limit)
     if observables is not None and not callable(observables):
         raise TypeError(f"observables must be a function or None, got {type(observables).__name__}")
     notes = redundancy_notes(model, q0, stacklevel=4)  # at the caller of simulate / simulate_batch
