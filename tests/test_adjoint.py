@@ -36,7 +36,7 @@ def cubic(strength, rhs) -> Problem:
 
 
 def root(strength, rhs=RHS, held=None):
-    return solve(cubic, (strength, rhs), jnp.zeros(N), 50, held)
+    return solve(lambda inputs: cubic(*inputs), (strength, rhs), jnp.zeros(N), 50, held)
 
 
 root_x = jax.jit(lambda s: root(s).x)

@@ -291,7 +291,7 @@ def test_the_derivative_of_a_restarted_solve_is_the_roots():
         return arctan_root(1.0, 5.0, root=theta)
 
     def root(theta):
-        sol = solve(builder, (theta,), jnp.full((1,), 1.5), 20)
+        sol = solve(builder, theta, jnp.full((1,), 1.5), 20)
         return sol.x[0], sol.iterations
 
     (x, iterations), grad = jax.jit(jax.value_and_grad(root, has_aux=True))(jnp.asarray(0.1))

@@ -20,6 +20,7 @@ from .._util import as_float
 from ..models.base import Model
 from .operators import MatrixKinds, Operators
 from .records import StepOutput
+from .subproblem_inputs import NewtonTolerances
 
 # --------------------------------------------------------------------------- data
 
@@ -71,9 +72,10 @@ class AbstractScheme(eqx.Module):
     (:class:`~nsga_jax.integrators.records.NewtonRecord`)."""
 
     @property
-    def tolerances(self) -> tuple[Scalar, Scalar, int]:
+    def tolerances(self) -> NewtonTolerances:
+        """The Newton settings every sub-problem of a step is given."""
         # tol_r and tol_f are typed as what __init__ accepts; their converter (as_float) made them arrays
-        return cast(jax.Array, self.tol_r), cast(jax.Array, self.tol_f), self.max_iter
+        return NewtonTolerances(cast(jax.Array, self.tol_r), cast(jax.Array, self.tol_f), self.max_iter)
 
     @abc.abstractmethod
     def matrix_kinds(self, model: Model) -> MatrixKinds:

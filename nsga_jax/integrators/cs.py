@@ -30,6 +30,7 @@ from .friction import projection_start
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, PositionAux, StepOutput, SubproblemRecord, VelocityAux, make_output
 from .residuals import DIVERGENCE_FACTOR
+from .subproblem_inputs import PositionInputs, SmoothInputs, StepInputs, VelocityInputs
 from .subproblems import (
     position_problem,
     smooth_motion,
@@ -84,18 +85,23 @@ class CS(AbstractGenAlpha):
         a_pred, v_pred, q_pred = self.predict(state, h)
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
 
+        step = StepInputs(model, ops, tol, t, h)  # what every sub-problem is given
+
         def smooth_res(xs, xp, xv):
-            return smooth_problem(model, ops, co, tol, t, h, q_pred, v_pred, offset=(xp[0], xv[0]))
+            return smooth_problem(SmoothInputs(**step.shared(), co=co, q_pred=q_pred, v_pred=v_pred,
+                                               offset=(xp[0], xv[0])))
 
         def as_smooth(xs):
             return smooth_motion(co, h, q_pred, v_pred, xs, jnp.zeros((model.n_bilateral,), q_pred.dtype))
 
         def position_res(xs):
-            return position_problem(model, ops, tol, t, h, as_smooth(xs), None, False, state.q)
+            return position_problem(PositionInputs(**step.shared(), smooth=as_smooth(xs), f_smooth=None,
+                                                   with_forces=False, q_prev=state.q))
 
         def velocity_res(xs, xp, candidates):
-            return velocity_problem(model, ops, tol, t, h, as_smooth(xs), xp[0], candidates, None, G_prev_v_prev,
-                                    with_forces=False)
+            return velocity_problem(VelocityInputs(**step.shared(), smooth=as_smooth(xs), U=xp[0],
+                                                   candidates=candidates, f_smooth=None,
+                                                   G_prev_v_prev=G_prev_v_prev, with_forces=False))
 
         def residuals(xs, xp, xv):
             rp = position_res(xs).residual(xp)

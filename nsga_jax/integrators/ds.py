@@ -52,6 +52,7 @@ from .records import (
     make_output,
     subproblem_result,
 )
+from .subproblem_inputs import PositionInputs, SmoothInputs, StepInputs, VelocityInputs
 from .subproblems import (
     position_problem,
     smooth_motion,
@@ -198,7 +199,8 @@ class DS(AbstractGenAlpha):
         held = state.factorisations or (None, None, None)
         # 1. smooth motion
         co = self.coefficients
-        sol_s = solve(smooth_problem, (model, ops, co, tol, t, h, q_pred, v_pred),
+        step = StepInputs(model, ops, tol, t, h)  # what every sub-problem is given
+        sol_s = solve(smooth_problem, SmoothInputs(**step.shared(), co=co, q_pred=q_pred, v_pred=v_pred),
                       smooth_start(v_pred, model.n_bilateral), self.max_iter, held[0], name="smooth_motion")
         smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
         qt, vt, vd = smooth.q, smooth.v, smooth.vd
@@ -209,16 +211,18 @@ class DS(AbstractGenAlpha):
 
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
-        sol_p = solve(position_problem, (model, ops, tol, t, h, smooth, f_smooth, self.nonsmooth_forces, state.q),
+        sol_p = solve(position_problem, PositionInputs(**step.shared(), smooth=smooth, f_smooth=f_smooth,
+                                                       with_forces=self.nonsmooth_forces, q_prev=state.q),
                       projection_start(model, qt), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
         velocity: VelocityAux
-        sol_v, W, velocity = velocity_jump(self.impact_law, (model, ops, tol, t, h, smooth, U, position.active,
-                                                             f_smooth, G_prev_v_prev, self.nonsmooth_forces),
-                                           projection_start(model, qt), self.max_iter, held[2], tol[0])
+        jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=position.active, f_smooth=f_smooth,
+                              G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces)
+        sol_v, W, velocity = velocity_jump(self.impact_law, jump, projection_start(model, qt), self.max_iter,
+                                           held[2], tol.tol_r)
 
         q, v = qt + U, vt + W
         results = [sol_s, sol_p, sol_v]

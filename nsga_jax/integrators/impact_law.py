@@ -46,6 +46,7 @@ then smooth algebra, with s = 1 or the root frozen at the switch).
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -55,6 +56,7 @@ from .friction import has_friction, velocity_rows
 from .model_terms import restitution
 from .newton import NewtonResult, solve
 from .records import VelocityAux
+from .subproblem_inputs import VelocityInputs
 from .subproblems import velocity_problem
 
 
@@ -112,22 +114,22 @@ def energetic_share(model: Model, mass_product, q: Vector, v_tilde: Vector, free
     return jnp.where(newton, 1.0, jnp.clip(root, 0.0, 1.0)).astype(v_c.dtype)
 
 
-def velocity_jump(impact_law: str, args: tuple, start, max_iter: int, held, slack: Scalar
+def velocity_jump(impact_law: str, inputs: VelocityInputs, start, max_iter: int, held, slack: Scalar
                   ) -> tuple[NewtonResult, Vector, VelocityAux]:
-    """Step 3 under the scheme's impact law: ``(record, W, aux)``. ``args``
+    """Step 3 under the scheme's impact law: ``(record, W, aux)``. ``inputs``
     are :func:`~nsga_jax.integrators.subproblems.velocity_problem`'s; Newton's
     law is its one solve, traced as it always was; the energetic law adds the
     compression jump (g_{q,n} v_n set to zero: every e = 0) and keeps the
     share of Newton's jump that :func:`energetic_share` allows."""
-    sol = solve(velocity_problem, args, start, max_iter, held, name="velocity_jump")
-    model, ops = args[0], args[1]
+    sol = solve(velocity_problem, inputs, start, max_iter, held, name="velocity_jump")
+    model, ops = inputs.model, inputs.ops
     if not energetic_applies(impact_law, model):
         return sol, sol.x[0], sol.aux
-    smooth, U, G_prev_v_prev = args[5], args[6], args[9]
-    compression = solve(velocity_problem, args[:9] + (jnp.zeros_like(G_prev_v_prev),) + args[10:], start,
-                        max_iter, held, name="velocity_jump_compression")
-    q = smooth.q + U
-    problem = velocity_problem(*args)
+    smooth = inputs.smooth
+    no_restitution = eqx.tree_at(lambda i: i.G_prev_v_prev, inputs, jnp.zeros_like(inputs.G_prev_v_prev))
+    compression = solve(velocity_problem, no_restitution, start, max_iter, held, name="velocity_jump_compression")
+    q = smooth.q + inputs.U
+    problem = velocity_problem(inputs)
     A = problem.linearise(sol.x, problem.residual(sol.x))  # the jump's matrix, M or M + h C
     G = velocity_rows(model, q, ops.constraints.jacobian(model, q))
     free = smooth.v + sol.x[0] - A.solve(G.T @ contact_impulses(sol.aux))

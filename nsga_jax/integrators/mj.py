@@ -36,6 +36,7 @@ from .newton import Problem, Residual, convergence_bound, solve
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, StepOutput, SubproblemRecord, VelocityAux, make_output, subproblem_result
 from .residuals import Scaling, augmented_residual, constraint_floor, roundoff_floor
+from .subproblem_inputs import MoreauJeanInputs
 
 
 class MJ(AbstractScheme):
@@ -84,9 +85,10 @@ class MJ(AbstractScheme):
             closing = model.constraints(q_n + 0.5 * h * v_n) <= 0.0
             candidates = ~is_unilateral(model) | closing
             restituted = restitution(model, q_n.dtype) * (ops.constraints.jacobian(model, q_n) @ v_n)
-        args = (model, ops, tol, t, h, self.theta, q_n, v_n, f_n, candidates, restituted)
+        inputs = MoreauJeanInputs(model, ops, tol, t, h, theta=self.theta, q_n=q_n, v_n=v_n, f_n=f_n,
+                                  candidates=candidates, restituted=restituted)
         x0 = (v_n, projection_start(model, v_n)[1])
-        sol = solve(moreau_jean_problem, args, x0, self.max_iter, name="moreau_jean")
+        sol = solve(moreau_jean_problem, inputs, x0, self.max_iter, name="moreau_jean")
         v, _ = sol.x
         q = q_n + h * (self.theta * v + (1.0 - self.theta) * v_n)
         kwargs = {}
@@ -102,12 +104,14 @@ class MJ(AbstractScheme):
         return StepState(t=t, q=q, v=v, vd=zero_n, a=zero_n), out
 
 
-def moreau_jean_problem(model: Model, ops: Operators, tol, t, h, theta, q_n, v_n, f_n, candidates, restituted):
+def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
     """The Moreau–Jean step as a Newton problem on x = (v_{n+1}, Λ):
     ``[M(q)(v - v_n) - h (θ f(q, v) + (1-θ) f_n) - g_q^{B T} σ^B;  -kv ġ^B;  -(kv²/pv) Λ^{B̄}]``,
     q = q_n + h (θ v + (1-θ) v_n), ġ = g_q(q) v + e g_q(q_n) v_n, B = candidates ∩ {σ >= 0};
     with friction, Λ and the residual gain the tangential rows of
     :mod:`~nsga_jax.integrators.friction`."""
+    model, ops, tol, t, h, theta = inputs.model, inputs.ops, inputs.tol, inputs.t, inputs.h, inputs.theta
+    q_n, v_n, f_n, candidates, restituted = inputs.q_n, inputs.v_n, inputs.f_n, inputs.candidates, inputs.restituted
     tol_r, tol_f, _ = tol
     n, nc = model.n_dof, model.n_constraints
     kv = pv = Scaling.of(model, h).kv

@@ -290,17 +290,18 @@ def _newton_loop(problem: Problem, x0: Any, max_iter: int | jax.Array,
     )
 
 
-def solve(builder: Callable[..., Problem], args: tuple, x0: Any, max_iter: int,
+def solve(builder: Callable[[Any], Problem], inputs: Any, x0: Any, max_iter: int,
           factorisation: Factorisation | None = None, name: str = "newton") -> NewtonResult:
-    """Newton on the sub-problem ``builder(*args) -> Problem``, modified Newton
+    """Newton on the sub-problem ``builder(inputs) -> Problem``, modified Newton
     from ``factorisation`` when one is given: :func:`newton`, under the profile
     scope ``name``, with the implicit derivative of its converged solution.
 
     ``builder`` must close over no arrays: everything the problem depends on
-    is in ``args`` (its floating-point arrays are what the derivative is taken
-    with respect to). The primal is :func:`newton` alone. Differentiated
+    is in ``inputs``, a pytree (a sub-problem's named inputs,
+    :mod:`~nsga_jax.integrators.subproblem_inputs`), whose floating-point
+    arrays are what the derivative is taken with respect to. The primal is :func:`newton` alone. Differentiated
     (``jax.jvp``, ``jax.grad``, ``jax.vmap`` of either), the solution x* of
-    R(x, θ) = 0 (θ: the arrays of ``args``) has the tangent of the implicit
+    R(x, θ) = 0 (θ: the arrays of ``inputs``) has the tangent of the implicit
     function theorem,
 
         dx = -J(x*)⁻¹ (∂R/∂θ · dθ),
@@ -312,12 +313,12 @@ def solve(builder: Callable[..., Problem], args: tuple, x0: Any, max_iter: int,
     The accuracy of dx follows the Newton tolerance, as x* does.
     """
     with jax.named_scope(name):
-        return _implicit_newton(builder, args, x0, factorisation, max_iter=max_iter)
+        return _implicit_newton(builder, inputs, x0, factorisation, max_iter=max_iter)
 
 
 @eqx.filter_custom_jvp
-def _implicit_newton(builder, args, x0, factorisation, *, max_iter):
-    return newton(builder(*args), x0, max_iter, factorisation)
+def _implicit_newton(builder, inputs, x0, factorisation, *, max_iter):
+    return newton(builder(inputs), x0, max_iter, factorisation)
 
 
 def _is_none(x) -> bool:
@@ -327,26 +328,26 @@ def _is_none(x) -> bool:
 @_implicit_newton.def_jvp
 def _implicit_newton_jvp(primals, tangents, *, max_iter):
     """The converged solution and its tangent of the implicit function theorem
-    (see :func:`solve`), linear in the tangents of ``args`` and transposable."""
-    builder, args, x0, factorisation = primals
-    t_args = tangents[1]
-    sol = _implicit_newton(builder, args, x0, factorisation, max_iter=max_iter)
-    no_tangent = jax.tree_util.tree_map(_is_none, t_args, is_leaf=_is_none)
-    nondiff, diff = eqx.partition(args, no_tangent, is_leaf=_is_none)
+    (see :func:`solve`), linear in the tangents of ``inputs`` and transposable."""
+    builder, inputs, x0, factorisation = primals
+    t_inputs = tangents[1]
+    sol = _implicit_newton(builder, inputs, x0, factorisation, max_iter=max_iter)
+    no_tangent = jax.tree_util.tree_map(_is_none, t_inputs, is_leaf=_is_none)
+    nondiff, diff = eqx.partition(inputs, no_tangent, is_leaf=_is_none)
 
     def residual_at(d, x):
-        return builder(*eqx.combine(d, nondiff)).residual(x)
+        return builder(eqx.combine(d, nondiff)).residual(x)
 
     x_star = sol.x
     res = residual_at(diff, x_star)
     # ∂R/∂θ · dθ at x*, and the correction -J(x*)⁻¹ applied to it (linear in its
     # right-hand side, so its jvp is the linear map itself)
-    _, t_r = jax.jvp(lambda d: residual_at(d, x_star).r, (diff,), (t_args,))
-    problem = builder(*args)
+    _, t_r = jax.jvp(lambda d: residual_at(d, x_star).r, (diff,), (t_inputs,))
+    problem = builder(inputs)
     # (a zero bound: an iterative linear solve gives its tightest tolerance to the tangent)
     zero_bound = jnp.zeros_like(res.bound)
     _, (t_x, _) = jax.jvp(lambda r: problem.update(x_star, res._replace(r=r, bound=zero_bound)), (res.r,), (t_r,))
-    _, t_aux = eqx.filter_jvp(lambda d, x: residual_at(d, x).aux, (diff, x_star), (t_args, t_x))
+    _, t_aux = eqx.filter_jvp(lambda d, x: residual_at(d, x).aux, (diff, x_star), (t_inputs, t_x))
     t_sol = NewtonResult(x=t_x, aux=t_aux, iterations=None, converged=None, residual_norm=None, tolerance=None,
                          factorisation=jax.tree_util.tree_map(lambda _: None, sol.factorisation))
     return sol, t_sol

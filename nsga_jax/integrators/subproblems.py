@@ -1,6 +1,8 @@
 """The three sub-problems of the nonsmooth generalized-α schemes (paper §3.3).
 
-Each builder returns the :class:`~nsga_jax.integrators.newton.Problem`
+Each builder takes its named inputs
+(:mod:`~nsga_jax.integrators.subproblem_inputs`) and returns the
+:class:`~nsga_jax.integrators.newton.Problem`
 ``(residual, linearise, correct)`` that :func:`~nsga_jax.integrators.newton.newton`
 iterates. The model's terms and the iteration matrices are the objects of
 ``ops`` (:class:`~nsga_jax.integrators.operators.Operators`): ``linearise``
@@ -27,34 +29,20 @@ and iterates all three together.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
-import jax
 import jax.numpy as jnp
 
 from .._custom_types import Scalar, Vector
-from ..models.base import Model
 from .coefficients import GenAlphaCoefficients
 from .friction import FrictionLaw, has_friction, restarted, velocity_rows
 from .krylov import element_top_left
-from .model_terms import ForceAt, convective, curvature, is_unilateral, pad_bilateral, restitution
+from .model_terms import convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound
-from .operators import Operators
 from .records import PositionAux, VelocityAux
 from .residuals import Scaling, augmented_residual, constraint_floor, roundoff_floor
+from .subproblem_inputs import PositionInputs, Smooth, SmoothInputs, VelocityInputs
 
 
-class Smooth(NamedTuple):
-    """The smooth motion: q̃, ṽ, v̇̃ (n,) and the physical multipliers λ̃ (nb,)."""
-
-    q: Vector
-    v: Vector
-    vd: Vector
-    lam: jax.Array
-
-
-def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, t: Scalar, h: Scalar,
-                   q_pred: Vector, v_pred: Vector, offset: tuple[Vector, Vector] | None = None):
+def smooth_problem(inputs: SmoothInputs) -> Problem:
     """Step 1: residual [M(q) v̇̃ - f(q, v, t) - g_q^T (ks λ̃ - ps g_q ṽ);  -ks g_q ṽ].
 
     The unknowns are x = (ṽ, λ̃_scaled); v̇̃ and q̃ follow from ṽ and the predictor
@@ -64,7 +52,8 @@ def smooth_problem(model: Model, ops: Operators, co: GenAlphaCoefficients, tol, 
     v = ṽ + W, keeping the bilateral velocity constraint on ṽ. The residual's
     ``aux`` is the physical λ̃ = ks λ - ps g_q ṽ.
     """
-    tol_r, tol_f, _ = tol
+    model, ops, (tol_r, tol_f, _), t, h = inputs.model, inputs.ops, inputs.tol, inputs.t, inputs.h
+    co, q_pred, v_pred, offset = inputs.co, inputs.q_pred, inputs.v_pred, inputs.offset
     n, nb = model.n_dof, model.n_bilateral
     ks = ps = Scaling.of(model, h).ks
     c_vd, c_q = co.vd_per_v(h), co.q_per_v(h)
@@ -132,21 +121,21 @@ def smooth_motion(co: GenAlphaCoefficients, h: Scalar, q_pred: Vector, v_pred: V
     return Smooth(q=q_pred + co.q_per_v(h) * dv, v=vt, vd=co.vd_per_v(h) * dv, lam=lam_physical)
 
 
-def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth,
-                     f_smooth: ForceAt | None, with_forces: bool, q_prev: Vector | None = None):
+def position_problem(inputs: PositionInputs) -> Problem:
     """Step 2: residual [M(q̃) U - h² f^p - g_q^{A T} ξ^A;  -kp g^A;  -(kp²/pp) ν^{Ā}]
     with ξ = kp ν - pp g(q), A = bilaterals ∪ {ξ_j >= 0}; ``aux = (A, ξ, g, g_q)``.
-    ``f_smooth``: the force at the smooth motion; ``with_forces=False`` drops h² f^p (eq. 31b).
+    ``inputs.f_smooth``: the force at the smooth motion; ``with_forces=False`` drops h² f^p (eq. 31b).
 
     With frictional contacts, the correction also carries Coulomb's law at
     position level (:mod:`~nsga_jax.integrators.friction`): the tangential
     multipliers ν_T act along g_T(q_m) on the slip of the contact points over
-    the step, Δ_T = g_T(q_m) (q̃ + U - q_n), q_m = (q_n + q̃)/2 (``q_prev`` is
-    q_n), within the disk
+    the step, Δ_T = g_T(q_m) (q̃ + U - q_n), q_m = (q_n + q̃)/2
+    (``inputs.q_prev`` is q_n), within the disk
     of radius μ times the normal correction ξ_N: a sticking point does not
     move over the step, a sliding one is held back by μ ξ_N. Its Newton
     updates are damped (``Problem.line_search``), as the velocity jump's."""
-    tol_r, tol_f, _ = tol
+    model, ops, (tol_r, tol_f, _), t, h = inputs.model, inputs.ops, inputs.tol, inputs.t, inputs.h
+    smooth, f_smooth, with_forces, q_prev = inputs.smooth, inputs.f_smooth, inputs.with_forces, inputs.q_prev
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
@@ -225,9 +214,7 @@ def position_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     return build(law)
 
 
-def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, smooth: Smooth, U: Vector,
-                     candidates: jax.Array, f_smooth: ForceAt | None, G_prev_v_prev: jax.Array,
-                     with_forces: bool):
+def velocity_problem(inputs: VelocityInputs) -> Problem:
     """Step 3: residual [M(q) W - h f* - g_q^{B T} σ^B;  -kv ġ^B;  -(kv²/pv) Λ^{B̄}] with
     ġ = g_q v + e g_{q,n} v_n, σ = kv Λ - pv ġ, B = bilaterals ∪ {j ∈ A : σ_j >= 0};
     ``aux = (B, σ, ġ, P_T)``. ``candidates`` is A; ``G_prev_v_prev`` is g_{q,n} v_n.
@@ -235,7 +222,9 @@ def velocity_problem(model: Model, ops: Operators, tol, t: Scalar, h: Scalar, sm
     multipliers gain the tangential Λ_T and the residual Alart–Curnier's rows
     (:mod:`~nsga_jax.integrators.friction`); q = q̃ + U is fixed here, so the
     tangents g_T(q) are evaluated once."""
-    tol_r, tol_f, _ = tol
+    model, ops, (tol_r, tol_f, _), t, h = inputs.model, inputs.ops, inputs.tol, inputs.t, inputs.h
+    smooth, U, candidates, f_smooth = inputs.smooth, inputs.U, inputs.candidates, inputs.f_smooth
+    G_prev_v_prev, with_forces = inputs.G_prev_v_prev, inputs.with_forces
     n, nb = model.n_dof, model.n_bilateral
     kv = pv = Scaling.of(model, h).kv
     unilateral = is_unilateral(model)
