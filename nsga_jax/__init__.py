@@ -7,10 +7,12 @@ name that needs them is first used (``nsga_jax.simulate``, ``nsga_jax.DS``,
 Importing it changes nothing outside it: no JAX option, no environment
 variable. Runs are float64 by default, which needs JAX's 64-bit mode on:
 call ``jax.config.update("jax_enable_x64", True)`` once, at the top of the
-program, before building models (or set ``JAX_ENABLE_X64=1``). A float64 run
+program, before building models (or set ``JAX_ENABLE_X64=1``), or
+``nsga_jax.configure_jax()``, which also sets the XLA CPU flag nsga_jax's
+steps run faster with (:mod:`nsga_jax.process_settings`). A float64 run
 with the mode off is refused by name (:class:`ConfigError`), never computed
 in float32; ``dtype="float32"`` runs either way. The command line
-(``nsga-jax``) turns the mode on for its own process.
+(``nsga-jax``) calls ``configure_jax()`` for its own process.
 """
 
 import importlib
@@ -25,6 +27,7 @@ _LAZY = {
     "integrate": "._integrate",
     "simulate": "._simulate",
     "simulate_batch": ".batch",
+    "configure_jax": ".process_settings",
     "AbstractScheme": ".integrators.base",
     "StepOutput": ".integrators.records",
     "Result": ".results",

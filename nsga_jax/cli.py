@@ -10,6 +10,7 @@ from typing import Any
 from .animate.command import animate_command, write_animation
 from .cli_config import config_command, scenes_command
 from .cli_options import CACHE_ENV, OneLineErrorParser, command_parser, one_line_warnings, option_names, step_sizes  # noqa: F401  (options)
+from .process_settings import configure_jax
 from .results import ConfigError, ConvergenceError, InvariantError
 
 EXIT_FAILED = 1
@@ -353,25 +354,13 @@ COMMANDS = {"run": _run, "animate": animate_command, "convergence": _convergence
             "sweep": _sweep, "bench": _bench, "scenes": scenes_command, "config": config_command}
 
 
-def float64_for_this_process() -> None:
-    """The command line runs in float64 by default (``--dtype float32`` where
-    a command has it): it turns JAX's 64-bit mode on for its own process,
-    as a program using the library does (importing nsga_jax does not). Before
-    JAX is loaded the environment variable does it, so ``--help`` and input
-    errors still answer without loading JAX."""
-    if "jax" in sys.modules:
-        sys.modules["jax"].config.update("jax_enable_x64", True)
-    else:
-        os.environ["JAX_ENABLE_X64"] = "1"
-
-
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code: 0, :data:`EXIT_FAILED`,
     :data:`EXIT_INPUT` (``error: ...`` on one line, no traceback) or
     :data:`EXIT_INTERRUPTED`. Errors inside nsga_jax itself keep their
     traceback."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)  # effective where numpy is not loaded yet
-    float64_for_this_process()
+    configure_jax()  # float64 and XLA's CPU flag for this process (importing nsga_jax sets neither)
     try:
         args = command_parser().parse_args(argv)
         with one_line_warnings():

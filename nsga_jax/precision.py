@@ -25,8 +25,8 @@ from .results import ConfigError
 DTYPES = ("float64", "float32")
 
 
-X64_CALL = ('call jax.config.update("jax_enable_x64", True) at the top of the program, before building models '
-            '(or set JAX_ENABLE_X64=1)')
+X64_CALL = ('call nsga_jax.configure_jax() (or jax.config.update("jax_enable_x64", True)) at the top of the '
+            'program, before building models (or set JAX_ENABLE_X64=1)')
 
 
 def x64_enabled() -> bool:

@@ -1,12 +1,12 @@
 import os
 
-import jax
 import numpy as np
 import pytest
 
 from nsga_jax.compilation_cache import ENV
+from nsga_jax.process_settings import configure_jax
 
-jax.config.update("jax_enable_x64", True)  # float64 runs need it; importing nsga_jax leaves it to its caller
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them (importing nsga_jax sets neither)
 
 QUICK_COMPILE = "--xla_backend_optimization_level=0"
 

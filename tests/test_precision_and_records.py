@@ -162,6 +162,24 @@ def test_importing_nsga_jax_changes_no_global_state():
     assert "ran float64" in out.stdout
 
 
+@pytest.mark.parametrize("user_flags", [None, "--xla_cpu_enable_concurrency_optimized_scheduler=true"])
+def test_configure_jax_sets_float64_and_the_cpu_flag_unless_the_user_chose(user_flags):
+    """nsga_jax.configure_jax(), what the command line calls: JAX's 64-bit
+    mode on (also when JAX loads after it) and the scheduler flag added to
+    XLA_FLAGS, where the user's own value of the flag is kept."""
+    code = ("import os, nsga_jax\n"
+            "nsga_jax.configure_jax()\n"
+            "import jax\n"
+            "print(jax.config.jax_enable_x64, os.environ['XLA_FLAGS'])\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_ENABLE_X64")}
+    if user_flags is not None:
+        env["XLA_FLAGS"] = user_flags
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    expected = user_flags or "--xla_cpu_enable_concurrency_optimized_scheduler=false"
+    assert out.stdout.split() == ["True", expected]
+
+
 def test_runs_of_either_precision_do_not_leak_into_each_other():
     """float64, float32, float64 in one process: each run computes in its own
     precision (JAX caches the constants a traced function closes over, so a

@@ -16,13 +16,13 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import jax
 
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 from nsga_jax.studies import MODES, run_step_sizes  # noqa: E402
 from nsga_jax.tables import write_csv  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 SWEEPS = {
     ("bouncing_ball", "narrow"): ({"t_end": 2.0}, [1e-3, 1.25e-3, 1.5e-3, 2e-3]),

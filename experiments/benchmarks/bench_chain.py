@@ -22,7 +22,9 @@ from pathlib import Path
 
 import jax
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+from nsga_jax.process_settings import configure_jax  # noqa: E402
+
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 
 def chain(n_links: int, length: float = 0.2, mass: float = 0.5):
@@ -42,7 +44,6 @@ def chain(n_links: int, length: float = 0.2, mass: float = 0.5):
 
 
 def measure(n_links: int, steps: int, repeats: int, h: float = 1e-3) -> dict:
-    import jax
 
     import nsga_jax as nj
 

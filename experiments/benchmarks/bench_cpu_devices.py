@@ -24,8 +24,9 @@ import sys
 
 MEASURE = r"""
 import json, sys
+from nsga_jax.process_settings import configure_jax
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 import jax
-jax.config.update("jax_enable_x64", True)
 import numpy as np
 from nsga_jax.batch import BatchRun, broadcast_members, member_mesh
 from nsga_jax.bench import _bench_scene

@@ -17,9 +17,10 @@ import jax.numpy as jnp  # noqa: E402
 
 import nsga_jax  # noqa: E402
 from nsga_jax.adjoint import adjoint_named  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import parametrize  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 H, N = 1e-3, 1500
 

@@ -23,7 +23,9 @@ from pathlib import Path
 
 import jax
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+from nsga_jax.process_settings import configure_jax  # noqa: E402
+
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -35,7 +37,6 @@ def measure(n_steps: int, mode: str, repeat: int) -> dict:
     import resource
     import time
 
-    import jax
     import jax.numpy as jnp
 
     import nsga_jax

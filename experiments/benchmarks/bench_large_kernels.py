@@ -27,7 +27,9 @@ from pathlib import Path
 
 import jax
 
-jax.config.update("jax_enable_x64", True)
+from nsga_jax.process_settings import configure_jax
+
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 import jax.numpy as jnp  # noqa: E402
 import jax.scipy.sparse.linalg as jsp  # noqa: E402

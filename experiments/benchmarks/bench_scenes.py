@@ -36,10 +36,11 @@ import numpy as np  # noqa: E402
 import nsga_jax  # noqa: E402, F401
 from nsga_jax.bench import CASES as BENCH_CASES  # noqa: E402
 from nsga_jax.bench import per_call  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 from nsga_jax.tables import write_csv  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 # the package's benchmark cases, with the cube at the paper's middle step over its impact window
 CASES = {**BENCH_CASES, "flexible_cube": {**BENCH_CASES["flexible_cube"], "h": 3e-5}}

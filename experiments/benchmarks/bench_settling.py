@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import argparse
 
-import jax
 import numpy as np
 
 from nsga_jax.exact import rocking_impact_times
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 RESOLVABLE = 10
 """Steps between two impacts of the exact solution for the second to count

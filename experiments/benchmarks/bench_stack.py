@@ -25,9 +25,9 @@ import time
 from datetime import date
 from pathlib import Path
 
-import jax
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 HEADER = ("| dim | boxes | case | t_end [s] | failed steps | drift [m] | position its. mean / max | "
           "velocity its. mean / max | max penetration [m] | final speed [m/s] | wall [s] |")

@@ -21,9 +21,10 @@ import numpy as np  # noqa: E402
 
 from nsga_jax.bench import per_call  # noqa: E402
 from nsga_jax.integrators.linalg import Tridiagonal, band_matrix  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 
 def lapack(band, rhs):

@@ -1,9 +1,9 @@
 """XLA's concurrency-optimised CPU scheduler on and off: per-step and compile
 time of ``nsga-jax bench`` runs, the two settings alternating run by run.
 
-Importing nsga_jax once turned the scheduler off (a hang of an earlier
-jaxlib 0.10 release; docs/notes.md). This measures what the setting costs or
-gains, each run a fresh process with a cold compilation cache::
+The command line and ``nsga_jax.configure_jax()`` turn the scheduler off
+(importing nsga_jax does not). This measures what that gains or costs, each
+run a fresh process with no compilation cache::
 
     python experiments/benchmarks/bench_xla_scheduler.py [--pairs 3] [--scenes impacting_bar,double_pendulum]
         [--out experiments/out/xla_scheduler]

@@ -9,14 +9,14 @@ import tempfile
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 
 from nsga_jax import plotting
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.studies import Reference, StudyRow, make_reference, slopes, study, write_study
 from nsga_jax.tables import read_csv
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 FIGURES = Path("docs/figures")
 RESULTS = Path("docs/results")

@@ -15,14 +15,14 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import jax
 import numpy as np  # noqa: E402
 from _paper import FIGURES, arguments, finish, run_study  # noqa: E402
 
 from nsga_jax import plotting  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import REGISTRY, load_scene  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 HS = [1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 2e-2, 3e-2]
 TIP_WALL = 5.005  # m: tip-to-wall distance; node 0.45 m from the tip reaches the wall at u = 5.455

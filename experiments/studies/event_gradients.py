@@ -47,9 +47,10 @@ import nsga_jax  # noqa: E402
 from nsga_jax import plotting  # noqa: E402
 from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.exact import bouncing_ball, rigid_pendulum  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene, parametrize  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 G = 9.81
 HS = (1e-3, 3e-4, 1e-4)

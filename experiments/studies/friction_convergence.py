@@ -44,10 +44,11 @@ import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
 from nsga_jax.elements.rigid_body import box_inertia, box_vertices  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.system import Gravity, PlaneContact, RigidBody2D, RigidBody3D, System  # noqa: E402
 from nsga_jax.tables import write_csv  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 G, MU, V0 = 9.81, 0.3, 2.0
 RESULTS = Path("docs/results/friction")

@@ -22,14 +22,14 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import jax
 import numpy as np  # noqa: E402
 
 from nsga_jax.adjoint import adjoint_named  # noqa: E402
 from nsga_jax.exact import bouncing_ball, rigid_pendulum  # noqa: E402
 from nsga_jax.identify import Data, identify, synthetic_data  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 RESULTS = Path("docs/results/identification")
 G = 9.81

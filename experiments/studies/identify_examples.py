@@ -30,9 +30,10 @@ import jax  # noqa: E402
 
 import nsga_jax as nj  # noqa: E402
 from nsga_jax.identify import Data, identify, synthetic_data, write_identification  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 ADJOINT = nj.ImpactTimeAdjoint()  # the adjoint of the committed table (recorded in commit 4670a9a)
 
 FIGURES = Path("docs/figures")
@@ -90,7 +91,6 @@ def run_case(name: str, out: Path) -> dict:
 def bar_checks() -> dict:
     """What docs/gradients.md says about the bar: e barely shows in the tip signals,
     and fitting E and e together from 30 % off stalls."""
-    import jax
     import jax.numpy as jnp
 
     from nsga_jax import integrate

@@ -16,11 +16,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import jax
-
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.tables import write_csv
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 CHILD = """
 import json, resource

@@ -23,13 +23,13 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import jax
 import numpy as np  # noqa: E402
 
 from nsga_jax.metrics import relative_l1_error  # noqa: E402
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import REGISTRY, load_scene  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 OVERRIDES = {"flexible_cube": {"height": 0.0505, "velocity": -2.43, "t_end": 0.02}}  # the impact window
 RUNS = [("float64", 1e-5), ("float32", 1e-5), ("float32", 1e-6), ("float32", 1e-7)]

@@ -11,15 +11,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import jax
 import numpy as np
 
 from nsga_jax import plotting
 from nsga_jax.exact import bouncing_ball
 from nsga_jax.metrics import observed_order, relative_l1_error
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import REGISTRY, load_scene
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 BAR_QUANTITIES = {
     "tip_gap": "tip gap",

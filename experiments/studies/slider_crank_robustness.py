@@ -23,16 +23,16 @@ import shutil
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 
 from nsga_jax import plotting
 from nsga_jax.metrics import relative_l1_error
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene
 from nsga_jax.studies import make_reference, run_step_sizes
 from nsga_jax.tables import write_csv
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 SCENE = "slider_crank"
 SCHEMES = ("ds", "cs")

@@ -41,10 +41,11 @@ import numpy as np
 
 import nsga_jax
 from nsga_jax.bench import bench, markdown
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene
 from nsga_jax.sweep import sweep
 
-jax.config.update("jax_enable_x64", True)  # float64, as the command line runs
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 SWEEPS = {
     "bouncing_ball": ({"e": [0.5, 0.7, 0.8, 0.9]}, None, {"t_end": 1.0}),

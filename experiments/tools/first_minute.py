@@ -18,7 +18,8 @@ import sys
 CHILD = """
 import sys, time
 import jax
-jax.config.update("jax_enable_x64", True)
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 import nsga_jax
 n, steps = int(sys.argv[1]), int(sys.argv[2])
 t0 = time.perf_counter()

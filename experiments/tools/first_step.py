@@ -18,7 +18,8 @@ import sys
 CHILD = """
 import sys
 import jax
-jax.config.update("jax_enable_x64", True)
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 import nsga_jax
 from nsga_jax.first_step import estimate_first_step, lu_rate
 n, scheme = int(sys.argv[1]), sys.argv[2]

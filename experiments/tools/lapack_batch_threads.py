@@ -24,7 +24,9 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
 
-jax.config.update("jax_enable_x64", True)
+from nsga_jax.process_settings import configure_jax  # noqa: E402
+
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 
 POOL = "tf_XLAEigen"

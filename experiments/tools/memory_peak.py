@@ -19,7 +19,8 @@ import sys
 CHILD = """
 import sys
 import jax
-jax.config.update("jax_enable_x64", True)
+configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
+from nsga_jax.process_settings import configure_jax  # noqa: E402
 import nsga_jax
 n = int(sys.argv[1])
 scene = nsga_jax.load_scene("flexible_cube", {"divisions": n, "height": 0.0501, "velocity": -1.0,
