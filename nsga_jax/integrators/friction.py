@@ -48,6 +48,7 @@ from jax import lax
 
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
+from .contact_law import NormalLaw
 from .linalg import AbstractFactorisation, linear_solve, minimum_norm_split, redundancy_shift
 from .newton import Problem, Residual, convergence_bound, where_needed
 
@@ -164,6 +165,11 @@ class FrictionLaw(NamedTuple):
     k: Scalar
     p: Scalar
     p_t: jax.Array
+
+    @property
+    def damped(self) -> bool:
+        """Whether the Newton updates are damped (:attr:`~nsga_jax.integrators.newton.Problem.line_search`)."""
+        return True
 
     @classmethod
     def of(cls, model: Model, candidates, unilateral, k: Scalar, p: Scalar, mass_diagonal: jax.Array | None,
@@ -346,11 +352,11 @@ class FrictionLaw(NamedTuple):
         return jnp.where(found, (1.0 + SLIP_MARGIN * scale) * first, jnp.inf)
 
 
-def restarted(law: FrictionLaw | None, build: Callable[[FrictionLaw], Problem]) -> dict:
+def restarted(law: NormalLaw | FrictionLaw, build: Callable[[FrictionLaw], Problem]) -> dict:
     """The ``restart`` and ``restart_factors`` of a sub-problem built by
     ``build(law)``: the law with its tangential penalties times a factor,
-    for each of :data:`RESTART_PENALTIES` (read when traced); none without
-    friction."""
-    if law is None or not RESTART_PENALTIES:
+    for each of :data:`RESTART_PENALTIES` (read when traced); none for the
+    frictionless law."""
+    if not isinstance(law, FrictionLaw) or not RESTART_PENALTIES:
         return {}
     return {"restart": lambda factor: build(law.rescaled(factor)), "restart_factors": tuple(RESTART_PENALTIES)}

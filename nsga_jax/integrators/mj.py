@@ -29,13 +29,13 @@ from .base import (
     AbstractScheme,
     StepState,
 )
+from .contact_law import NormalLaw
 from .friction import FrictionLaw, has_friction, projection_start, restarted, velocity_rows
-from .linalg import solve_bordered
 from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, StepOutput, SubproblemRecord, VelocityAux, make_output, subproblem_result
-from .residuals import Scaling, augmented_residual, constraint_floor, roundoff_floor
+from .residuals import Scaling, constraint_floor, roundoff_floor
 from .subproblem_inputs import MoreauJeanInputs
 
 
@@ -116,12 +116,13 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
     n, nc = model.n_dof, model.n_constraints
     kv = pv = Scaling.of(model, h).kv
     unilateral = is_unilateral(model)
-    law = None
-    if has_friction(model):  # tangential penalties from the start of the step
+    friction = has_friction(model)
+    law: NormalLaw | FrictionLaw = NormalLaw(candidates, unilateral, kv, pv)
+    if friction:  # tangential penalties from the start of the step
         law = FrictionLaw.of(model, candidates, unilateral, kv, pv, jnp.diagonal(ops.mass.matrix(model, q_n)),
                              model.tangent_jacobian(q_n))
 
-    def build(law: FrictionLaw | None) -> Problem:
+    def build(law: NormalLaw | FrictionLaw) -> Problem:
         """The step with the contact law ``law`` (:func:`~nsga_jax.integrators.friction.restarted`)."""
 
         def position(v):
@@ -130,7 +131,7 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
         def rows(q):
             """g_q(q) (and g_T(q) below it, with friction) and the restitution term of each row."""
             G = ops.constraints.jacobian(model, q)
-            if law is None:
+            if not friction:
                 return G, restituted
             G = velocity_rows(model, q, G)
             return G, jnp.concatenate([restituted, jnp.zeros((G.shape[0] - nc,), q.dtype)])
@@ -144,12 +145,9 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
                 return Residual(inertia - force, convergence_bound([inertia, force], tol_r, tol_f), ())
             G, e_term = rows(q)
             gdot = G @ v + e_term
-            if law is not None:
-                res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
-                active, aug, tangential = res.aux
-                return res._replace(aux=VelocityAux(active, aug, gdot[:nc], tangential))
-            res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
-            return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
+            res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
+            active, aug, tangential = res.aux
+            return res._replace(aux=VelocityAux(active, aug, gdot[:nc], tangential))
 
         def update(x, res):
             v, Lam = x
@@ -163,7 +161,7 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
                 if nc:
                     active, sigma = res.aux[0], res.aux[1]
                     A = A - h * theta * curvature(model, q, jnp.where(active, sigma, 0.0))
-                if law is not None and not model.linear_constraints:  # d(g_T^T P_T)/dq
+                if friction and not model.linear_constraints:  # d(g_T^T P_T)/dq
                     A = A - h * theta * jax.jacfwd(lambda y: model.tangent_jacobian(y).T @ res.aux.friction)(q)
                 return A, K_norm, C_norm
 
@@ -173,14 +171,10 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
             G, e_term = rows(q)
             floor = floor + constraint_floor(kv, G, v)
             G_low = G[:nc] + h * theta * convective(model, q, v)
-            if law is None:
-                dv, dLam = solve_bordered(A, res.r[:n], res.r[n:], G, G_low, res.aux[0], kv, pv)
-                return (dv, dLam), floor
-            if not model.linear_constraints:  # d(g_T v)/dq, the tangential rows' convective part
-                G_low = jnp.concatenate([G_low, G[nc:] + h * theta * jax.jacfwd(
-                    lambda y: model.tangent_jacobian(y) @ v)(q)])
-            else:
-                G_low = jnp.concatenate([G_low, G[nc:]])
+            if friction:  # the tangential rows, with their convective part d(g_T v)/dq
+                G_T = G[nc:] if model.linear_constraints else G[nc:] + h * theta * jax.jacfwd(
+                    lambda y: model.tangent_jacobian(y) @ v)(q)
+                G_low = jnp.concatenate([G_low, G_T])
             dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G_low, Lam, G @ v + e_term, None)
             return (dv, dLam), floor
 

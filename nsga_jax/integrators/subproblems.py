@@ -33,12 +33,13 @@ import jax.numpy as jnp
 
 from .._custom_types import Scalar, Vector
 from .coefficients import GenAlphaCoefficients
+from .contact_law import NormalLaw
 from .friction import FrictionLaw, has_friction, restarted, velocity_rows
 from .krylov import element_top_left
 from .model_terms import convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound
 from .records import PositionAux, VelocityAux
-from .residuals import Scaling, augmented_residual, constraint_floor, roundoff_floor
+from .residuals import Scaling, constraint_floor, roundoff_floor
 from .subproblem_inputs import PositionInputs, Smooth, SmoothInputs, VelocityInputs
 
 
@@ -139,7 +140,8 @@ def position_problem(inputs: PositionInputs) -> Problem:
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
-    law = GT = None
+    law: NormalLaw | FrictionLaw = NormalLaw(True, unilateral, kp, pp)
+    GT = None
     if has_friction(model):
         assert q_prev is not None, "friction at position level needs the state q_n"
         # the slip over the step by the midpoint rule: exact to O(|q̃ - q_n|³) on a turning body
@@ -154,7 +156,14 @@ def position_problem(inputs: PositionInputs) -> Problem:
             fp = fp + (G[:nb] - GB_smooth).T @ smooth.lam  # (g_q^T - g̃_q^T) λ̃, eq. 29
         return fp
 
-    def build(law: FrictionLaw | None) -> Problem:
+    def law_rows(G, g, q):
+        """The rows the law constrains: g_q and the gaps g(q) and, with friction,
+        below them g_T and the contact points' slip over the step Δ_T."""
+        if GT is None:
+            return G, g
+        return jnp.concatenate([G, GT]), jnp.concatenate([g, GT @ (q - q_prev)])
+
+    def build(law: NormalLaw | FrictionLaw) -> Problem:
         """The sub-problem with the contact law ``law`` (:func:`~nsga_jax.integrators.friction.restarted`)."""
         def residual(x):
             U, nu = x
@@ -163,15 +172,9 @@ def position_problem(inputs: PositionInputs) -> Problem:
             G = ops.constraints.jacobian(model, q)
             inertia = ops.mass.product(model, smooth.q, U)
             force = h**2 * f_p(q, G) if with_forces else jnp.zeros_like(U)
-            if law is not None:
-                res = law.residual(inertia, force, jnp.concatenate([G, GT]), slip_rows(g, q), nu, tol_r, tol_f)
-                return res._replace(aux=PositionAux(res.aux[0], res.aux[1], gap=g, jacobian=G))
-            res = augmented_residual(inertia, force, G, g, nu, kp, pp, True, unilateral, tol_r, tol_f)
-            return res._replace(aux=PositionAux(*res.aux, gap=g, jacobian=G))
-
-        def slip_rows(g, q):
-            """The gaps g(q) and, below them, the contact points' slip over the step Δ_T."""
-            return jnp.concatenate([g, GT @ (q - q_prev)])
+            G_all, rows = law_rows(G, g, q)
+            res = law.residual(inertia, force, G_all, rows, nu, tol_r, tol_f)
+            return res._replace(aux=PositionAux(res.aux[0], res.aux[1], gap=g, jacobian=G))
 
         def linearise(x, res):
             def matrix():  # eq. 48's top-left block, S_t^p: -d(g_q^{A T} ξ^A)/dq - h² df^p/dq
@@ -200,16 +203,13 @@ def position_problem(inputs: PositionInputs) -> Problem:
             floor = constraint_floor(kp, G, q)
             if with_forces:
                 floor = floor + roundoff_floor(h**2, matrix.K_norm, matrix.C_norm, q, smooth.v)
-            if law is not None:
+            if GT is not None:
                 floor = floor + constraint_floor(kp, GT, q - q_prev)
-                G_all = jnp.concatenate([G, GT])
-                dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, slip_rows(res.aux.gap, q),
-                                          res.bound)
-                return (dU, dnu), floor
-            dU, dnu = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kp, pp, res.bound)
+            G_all, rows = law_rows(G, res.aux.gap, q)
+            dU, dnu = law.correction(matrix, res.r[:n], res.r[n:], G_all, G_all, nu, rows, res.bound)
             return (dU, dnu), floor
 
-        return Problem(residual, linearise, correct, line_search=law is not None, **restarted(law, build))
+        return Problem(residual, linearise, correct, line_search=law.damped, **restarted(law, build))
 
     return build(law)
 
@@ -231,7 +231,7 @@ def velocity_problem(inputs: VelocityInputs) -> Problem:
     q = smooth.q + U
     G = ops.constraints.jacobian(model, q)
     restituted = restitution(model, q.dtype) * G_prev_v_prev
-    law = None
+    law: NormalLaw | FrictionLaw = NormalLaw(candidates, unilateral, kv, pv)
     if has_friction(model):  # the rows whose rates the law constrains: g_q and g_T
         G = velocity_rows(model, q, G)
         restituted = jnp.concatenate([restituted, jnp.zeros((G.shape[0] - restituted.shape[0],), q.dtype)])
@@ -249,7 +249,7 @@ def velocity_problem(inputs: VelocityInputs) -> Problem:
             assert f_smooth is not None  # given whenever with_forces
             f_const = f_const + ops.force.change(model, f_smooth, q, smooth.v, t)
 
-    def build(law: FrictionLaw | None) -> Problem:
+    def build(law: NormalLaw | FrictionLaw) -> Problem:
         """The sub-problem with the contact law ``law`` (:func:`~nsga_jax.integrators.friction.restarted`)."""
         def residual(x):
             W, Lam = x
@@ -263,12 +263,9 @@ def velocity_problem(inputs: VelocityInputs) -> Problem:
             else:
                 force = jnp.zeros_like(W)
             inertia = ops.mass.product(model, q, W)
-            if law is not None:
-                res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
-                active, aug, tangential = res.aux
-                return res._replace(aux=VelocityAux(active, aug, gdot[:model.n_constraints], tangential))
-            res = augmented_residual(inertia, force, G, gdot, Lam, kv, pv, candidates, unilateral, tol_r, tol_f)
-            return res._replace(aux=VelocityAux(*res.aux, rate=gdot))
+            res = law.residual(inertia, force, G, gdot, Lam, tol_r, tol_f)
+            active, aug, tangential = res.aux
+            return res._replace(aux=VelocityAux(active, aug, gdot[:model.n_constraints], tangential))
 
         def linearise(x, res):
             def matrix():  # eq. 49's top-left block, S_t^v
@@ -284,17 +281,13 @@ def velocity_problem(inputs: VelocityInputs) -> Problem:
 
         def correct(x, res, matrix):
             W, Lam = x
-            active = res.aux[0]
             v = smooth.v + W
             floor = constraint_floor(kv, G, v)
             if with_forces:
                 floor = floor + roundoff_floor(h, matrix.K_norm, matrix.C_norm, q, v)
-            if law is not None:
-                dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted, res.bound)
-                return (dW, dLam), floor
-            dW, dLam = matrix.bordered(res.r[:n], res.r[n:], G, G, active, kv, pv, res.bound)
+            dW, dLam = law.correction(matrix, res.r[:n], res.r[n:], G, G, Lam, G @ v + restituted, res.bound)
             return (dW, dLam), floor
 
-        return Problem(residual, linearise, correct, line_search=law is not None, **restarted(law, build))
+        return Problem(residual, linearise, correct, line_search=law.damped, **restarted(law, build))
 
     return build(law)

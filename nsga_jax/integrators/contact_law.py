@@ -1,0 +1,68 @@
+"""The frictionless contact law of the projection sub-problems, as an object.
+
+A sub-problem with constraints is given its contact law as an object with
+one interface, :class:`NormalLaw` here or, where the model has frictional
+contacts, :class:`~nsga_jax.integrators.friction.FrictionLaw`:
+
+- ``law.residual(inertia, force, G, rate, lam, tol_r, tol_f)``: the
+  residual ``[inertia - force - G^T P;  r_c]`` and its ``aux = (active,
+  σ, P_T)`` (P_T ``None`` without friction);
+- ``law.correction(matrix, r1, r_c, G_up, G_low, lam, rate, bound)``: the
+  Newton correction (dx, dΛ) with the coordinates eliminated through
+  ``matrix``;
+- ``law.damped``: whether the sub-problem's updates are damped
+  (:attr:`~nsga_jax.integrators.newton.Problem.line_search`).
+
+:class:`NormalLaw` is the law of eqs. 37 and 42: the augmented multiplier
+σ = k Λ - p c (c the gap or the rate of each row), active where a row is
+bilateral or σ >= 0 among the candidates, ``G^T σ`` on the active rows
+(:func:`~nsga_jax.integrators.residuals.augmented_residual`) and the
+bordered correction of the active rows
+(:meth:`~nsga_jax.integrators.linalg.AbstractFactorisation.bordered`).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+
+from .._custom_types import Scalar, Vector
+from .linalg import AbstractFactorisation
+from .newton import Residual
+from .residuals import augmented_residual
+
+
+class NormalLaw(NamedTuple):
+    """The frictionless law with scaling ``k`` and penalty ``p`` on the rows
+    ``candidates`` (bool (nc,), or ``True`` for every row); ``unilateral``
+    (nc,) marks the rows that may open."""
+
+    candidates: Any
+    unilateral: jax.Array
+    k: Scalar
+    p: Scalar
+
+    @property
+    def damped(self) -> bool:
+        """Whether the Newton updates are damped (:attr:`~nsga_jax.integrators.newton.Problem.line_search`)."""
+        return False
+
+    def active(self, lam: jax.Array, rate: jax.Array) -> jax.Array:
+        """The active set: candidates that are bilateral or have σ = k Λ - p c >= 0."""
+        return self.candidates & (~self.unilateral | (self.k * lam - self.p * rate >= 0))
+
+    def residual(self, inertia: Vector, force: Vector, G: jax.Array, rate: jax.Array, lam: jax.Array,
+                 tol_r, tol_f) -> Residual:
+        """``[inertia - force - G^T σ_A;  r_c]`` with ``aux = (active, σ, None)``."""
+        res = augmented_residual(inertia, force, G, rate, lam, self.k, self.p, self.candidates, self.unilateral,
+                                 tol_r, tol_f)
+        return res._replace(aux=(*res.aux, None))
+
+    def correction(self, matrix: AbstractFactorisation, r1: Vector, r_c: jax.Array, G_up: jax.Array,
+                   G_low: jax.Array, lam: jax.Array, rate: jax.Array, bound: Scalar | None) -> tuple[Vector, jax.Array]:
+        """The bordered correction on the active rows at (lam, rate)."""
+        return matrix.bordered(r1, r_c, G_up, G_low, self.active(lam, rate), self.k, self.p, bound)
+
+
+__all__ = ["NormalLaw"]
