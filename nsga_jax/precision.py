@@ -43,6 +43,14 @@ def require_x64_for(dtype: str) -> None:
                           f'{X64_CALL}; or run with dtype="float32"')
 
 
+def require_x64(what: str) -> None:
+    """Refuse ``what``, a computation made for float64 only (tolerances of
+    1e-8 relative), while JAX's 64-bit mode is off: its float32 arrays
+    would give a verdict that means nothing."""
+    if not x64_enabled():
+        raise ConfigError(f"{what} computes in float64 and needs JAX's 64-bit mode, which is off: {X64_CALL}")
+
+
 def require_x64_for_inputs(**inputs) -> None:
     """Refuse float64 inputs (NumPy arrays, Python lists) while JAX's 64-bit
     mode is off, naming the first: JAX would silently round them to float32.

@@ -140,6 +140,24 @@ def test_float64_inputs_refused_by_integrate_with_x64_off():
     assert sol.q.dtype == jnp.float32 and int(sol.result) == 0
 
 
+def test_float64_only_computations_refused_with_x64_off():
+    """check_model (comparisons relative to 1e-8) and parametrize of a
+    float64 scene (its parameters would be float32 arrays, and integrate
+    would then run in float32 without a word) refuse by name while JAX's
+    64-bit mode is off; a float32 scene is parametrized as float32."""
+    import jax
+
+    ball = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+    with jax.enable_x64(False):
+        with pytest.raises(nj.ConfigError, match="check_model computes in float64 and needs JAX's 64-bit mode"):
+            nj.check_model(ball, np.array([1.0]), np.array([0.0]))
+        with pytest.raises(nj.ConfigError, match='dtype="float64" \\(the default\\) needs JAX'):
+            nj.scenes.parametrize("impacting_bar", {"t_end": 0.01}, names=["E"])
+        params, _ = nj.scenes.parametrize("impacting_bar", {"t_end": 0.01, "dtype": "float32"}, names=["E"])
+        assert params["E"].dtype == np.float32
+    assert nj.check_model(ball, np.array([1.0]), np.array([0.0]))[0] == "sizes"  # x64 on: it runs
+
+
 def test_importing_nsga_jax_changes_no_global_state():
     """A fresh process: importing the package and its numerical modules, and
     building a scene, leaves JAX's 64-bit mode and XLA_FLAGS as they were;

@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..precision import require_x64
 from ..results import ConfigError
 from .base import Model
 
@@ -35,7 +36,8 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
     """Compare every declared size and structure flag of ``model`` with its
     functions at ``samples`` random states near ``(q, v)`` (default: zeros)
     and return what was checked; raise :class:`~nsga_jax.ConfigError` naming
-    the first flag or size the functions contradict.
+    the first flag or size the functions contradict (or, before anything,
+    saying that JAX's 64-bit mode is off: the comparisons are made in float64).
 
     Checked: the shapes of ``mass`` (n, n), ``force`` (n,), ``bilateral``
     (nb,), ``unilateral`` (nu,) and ``restitution`` (nu,); ``mass_product``
@@ -52,6 +54,7 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
         t: the time at which the force is evaluated [s].
         samples: random states compared, each ``q + spread N(0, 1)``.
     """
+    require_x64("check_model")  # its comparisons are relative to 1e-8
     n, nb, nu = model.n_dof, model.n_bilateral, model.n_unilateral
     cls = type(model).__name__
     q0 = jnp.zeros(n) if q is None else jnp.asarray(q, float)

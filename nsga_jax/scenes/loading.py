@@ -144,9 +144,13 @@ def parametrize(name_or_path: str | Path, overrides: dict[str, Any] | None = Non
 
     The scene is loaded and validated first (with ``overrides``); integer and
     choice parameters (element counts, mass-matrix kind) are structure, fixed
-    at these values.
+    at these values. A float64 scene (the default ``dtype``) with JAX's
+    64-bit mode off is refused by name: its parameters would be float32.
     """
     scene = load_scene(name_or_path, overrides)
+    from ..precision import require_x64_for
+
+    require_x64_for(scene.solver["dtype"])  # its parameters would be float32 arrays without a word
     spec = scene.spec
     floats = [k for k, p in spec.parameters.items() if p.kind == "float"]
     names = list(floats if names is None else names)
