@@ -198,7 +198,7 @@ def position_problem(inputs: PositionInputs) -> Problem:
 
         def correct(x, res, matrix):
             U, nu = x
-            active, xi, _, G = res.aux
+            G = res.aux.jacobian
             q = smooth.q + U
             floor = constraint_floor(kp, G, q)
             if with_forces:
