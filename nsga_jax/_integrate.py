@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ._run_core import advance, prepare_and_init
 from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
 from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
@@ -171,8 +172,7 @@ def integrate(
     h = jnp.asarray(h, dtype)
     q0 = jnp.asarray(q0, dtype)
     v0 = jnp.asarray(v0, dtype)
-    ops = scheme.prepare(model, h, t0)
-    state0 = scheme.init(model, t0, q0, v0)
+    ops, state0 = prepare_and_init(model, scheme, t0, q0, v0, h)
 
     c = checkpoint_every or max(1, math.ceil(math.sqrt(n_steps)))
     n_chunks = -(-n_steps // c)
@@ -186,8 +186,7 @@ def integrate(
 
     def one_step(carry, k):  # carry: the state and the adjoint's extra
         state, extra = carry
-        state = eqx.tree_at(lambda s: s.t, state, t0 + k.astype(dtype) * h)  # t0 + k h, never accumulated
-        new, out, extra = adjoint.step(scheme, model, ops, state, extra, h)
+        new, out, extra = advance(model, scheme, ops, state, t0 + k.astype(dtype) * h, h, adjoint=adjoint, extra=extra)
         new_carry = (new, extra)
         if padded:
             new_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new_carry, carry)

@@ -29,70 +29,28 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 
+from ._run_core import prepare_and_init, run_chunk
 from .chunks import RecordFiles, chunk_length, chunk_plan
 from .compilation_cache import cache_events, compile_source
 from .diagnosis import FLOAT32_HINT, nonfinite_origin
 from .first_step import LIMIT_SECONDS, NOTE_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
-from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
+from .integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
 from .memory import check_fits
 from .models.base import Model
 from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
 from .precision import cast_floats
 from .progress import Progress
-from .results import RESULTS, ConvergenceError, InvariantError, Result, from_code
+from .results import ConvergenceError, InvariantError, Result
 from .run_inputs import check_run_inputs
 from .saveat import DEVICE_ONLY, SaveAt, refuse
 from .solution import Observables, Solution, host_solution, with_observables
 from .validation import integer, require_instance
 
-# --------------------------------------------------------------------- the loop
-
-
-def _run_chunk(model, scheme, ops, state, h, t_start, steps, stop_on_failure, length):
-    """Up to ``length`` steps of ``scheme`` in one ``while_loop``, writing each
-    step's record (packed in two vectors, :func:`pack_output`) into buffers of
-    ``length`` records, returned as they are (the host unpacks them into
-    views, :func:`unpack_outputs`). The loop takes ``steps`` steps (a traced
-    count of at most ``length``: the host plans the chunks, so no counter on
-    the device ever passes a chunk's length), or stops after a failure when
-    ``stop_on_failure``; the buffer's unused tail is marked not done. Each
-    step starts at ``t_start + i h`` (the host computes ``t_start = t0 + k h``
-    in float64): time is never accumulated step by step. Runs with another h
-    or another number of steps reuse the compilation."""
-    template = output_template(model, state.q.dtype, scheme.subproblems)
-    n_float, n_int = packed_sizes(template)
-    buffer = (jnp.zeros((length, n_float), state.q.dtype), jnp.zeros((length, n_int), jnp.int32))
-
-    def going(c):
-        i, _, stopped, _ = c
-        return (i < steps) & ~stopped
-
-    def body(c):
-        i, state, stopped, buffer = c
-        state = eqx.tree_at(lambda s: s.t, state, t_start + i.astype(h.dtype) * h)
-        state, out = scheme.step(model, ops, state, h)
-        buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 0) for b, x in zip(buffer, pack_output(out)))
-        failed = from_code(out.result) != RESULTS.successful
-        return i + 1, state, stopped | (failed & stop_on_failure), buffer
-
-    i, state, _, buffer = lax.while_loop(going, body, (jnp.zeros((), jnp.int32), state, jnp.zeros((), bool), buffer))
-    return state, (buffer, jnp.arange(length) < i)
-
-
-# filter_jit's wrapper has ``lower`` (compiled ahead of the run); its declared type is the bare function's
-_run_chunk_jit = cast(Any, eqx.filter_jit(_run_chunk))
-
-
-def prepare_and_init(model, scheme, t0, q0, v0, h):
-    ops = scheme.prepare(model, h, t0)
-    state = scheme.init(model, t0, q0, v0)
-    return ops, state
-
-
-_prepare_and_init = cast(Any, eqx.filter_jit(prepare_and_init))  # used through ``lower`` (as above)
+# filter_jit's wrappers have ``lower`` (compiled ahead of the run); their declared types are the bare functions'
+_run_chunk_jit = cast(Any, eqx.filter_jit(run_chunk))
+_prepare_and_init = cast(Any, eqx.filter_jit(prepare_and_init))
 
 
 def simulate(

@@ -29,11 +29,12 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ._simulate import chunk_length, prepare_and_init, prepend_initial
+from ._run_core import prepare_and_init, run_chunk
+from ._simulate import chunk_length, prepend_initial
 from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
 from .integrators.linalg import bounded_lapack_batches
-from .integrators.records import StepOutput, output_template, pack_output, packed_sizes, unpack_outputs
+from .integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
 from .memory import check_fits
 from .models.base import Model
 from .monitors import RunTotals
@@ -124,47 +125,6 @@ def _on_devices(fn, mesh: Mesh | None):
     return jax.shard_map(fn, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
 
 
-def _run_members(model, scheme, ops, state, h, t_start, steps, length: int):
-    """Up to ``length`` steps of every member (leading axis of every argument).
-
-    The loop runs over steps with the step ``vmap``-ed inside it, not the other
-    way round: its trip count and the record index are then shared by all
-    members (a ``while_loop`` under ``vmap`` would carry, and select, the whole
-    record buffer at every step). Member b takes ``steps[b]`` steps (at most
-    ``length``, planned on the host: no device counter passes a chunk), each
-    starting at ``t_start[b] + i h[b]`` (never accumulated), and then keeps
-    its state. Records come out packed (:func:`pack_output`), as float and
-    integer buffers (B, length, fields), with the mask of steps taken (B,
-    length); the host unpacks them (:func:`unpack_outputs` on NumPy arrays
-    makes views, where unpacking here would copy every record once more).
-    """
-    step = jax.vmap(lambda m, s, o, st, hh: s.step(m, o, st, hh))
-    n_float, n_int = packed_sizes(output_template(model, state.q.dtype, scheme.subproblems))
-    B = len(h)
-    buffer = (jnp.zeros((B, length, n_float), state.q.dtype), jnp.zeros((B, length, n_int), jnp.int32))
-    mask = jnp.zeros((B, length), bool)
-
-    def going(c):
-        i, _, _, _ = c
-        return (i < length) & jnp.any(i < steps)
-
-    def body(c):
-        i, state, buffer, mask = c
-        do = i < steps
-        state = eqx.tree_at(lambda s: s.t, state, t_start + i.astype(h.dtype) * h)
-        new_state, out = step(model, scheme, ops, state, h)
-        state = jax.tree_util.tree_map(
-            lambda a, b: jnp.where(do.reshape(-1, *([1] * (a.ndim - 1))), a, b), new_state, state)
-        packed = jax.vmap(pack_output)(out)
-        buffer = tuple(lax.dynamic_update_index_in_dim(b, x, i, 1) for b, x in zip(buffer, packed))
-        mask = lax.dynamic_update_index_in_dim(mask, do, i, 1)
-        return i + 1, state, buffer, mask
-
-    init = (jnp.zeros((), jnp.int32), state, buffer, mask)
-    _, state, buffer, mask = lax.while_loop(going, body, init)
-    return state, (buffer, mask)
-
-
 @functools.cache
 def _compiled_steps(length: int, mesh: Mesh | None):
     """The jitted preparation and chunk programs of a batch over ``mesh``
@@ -172,7 +132,7 @@ def _compiled_steps(length: int, mesh: Mesh | None):
     :func:`needs_bounded_lapack_batches` says so: one pair per mesh keeps the two
     tracings apart)."""
     prepare = eqx.filter_jit(_on_devices(_prepare_members, mesh))
-    run = functools.partial(_run_members, length=length)
+    run = functools.partial(run_chunk, stop_on_failure=False, length=length, members=True)
     return prepare, eqx.filter_jit(_on_devices(run, mesh))
 
 

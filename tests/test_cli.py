@@ -63,7 +63,7 @@ def test_later_runs_load_compiled_programs_from_the_cache(tmp_path):
     # ball's preparation may or may not be, from one run to the next); the time
     # loop's chunk (seconds) always is, and a run that missed it would add one
     def chunk_entries():
-        return sorted(p.name for p in cache.iterdir() if p.name.startswith("jit__run_chunk"))
+        return sorted(p.name for p in cache.iterdir() if p.name.startswith("jit_run_chunk"))
 
     entries = chunk_entries()
     assert entries

@@ -98,7 +98,7 @@ def test_float32_run_computes_in_float32_with_x64_on(name):
     import jax
     import jax.numpy as jnp
 
-    from nsga_jax._simulate import _run_chunk, prepare_and_init
+    from nsga_jax._run_core import prepare_and_init, run_chunk
     from nsga_jax.precision import cast_floats
 
     assert jax.config.jax_enable_x64
@@ -110,7 +110,7 @@ def test_float32_run_computes_in_float32_with_x64_on(name):
     assert _float64_values(prepare.jaxpr) == []
     ops, state = prepare_and_init(model, scheme, t0, q0, v0, h)
     assert state.q.dtype == state.t.dtype == state.a.dtype == jnp.float32
-    chunk = eqx.filter_make_jaxpr(lambda *args: _run_chunk(*args, 2))(
+    chunk = eqx.filter_make_jaxpr(lambda *args: run_chunk(*args, 2))(
         model, scheme, ops, state, h, t0, jnp.asarray(2, jnp.int32), jnp.asarray(False))[0]
     assert _float64_values(chunk.jaxpr) == []
 
