@@ -98,14 +98,19 @@ def run_chunk(model: Model, scheme: AbstractScheme, ops: Operators, state: StepS
     def body(carry):
         i, state, stopped, buffers, taken = carry
         do = i < steps
-        new, out = step(model, scheme, ops, state, t_start + i.astype(h.dtype) * h, h)
+        t = t_start + i.astype(h.dtype) * h
+        # set here too, so that a finished member keeps this state: selecting against the state
+        # before the update measured 10 % slower a step (double pendulum, 64 members)
+        state = eqx.tree_at(lambda s: s.t, state, t)
+        new, out = step(model, scheme, ops, state, t, h)
         if members:  # a member past its steps keeps its state
             new = jax.tree_util.tree_map(lambda a, b: jnp.where(do.reshape(-1, *([1] * (a.ndim - 1))), a, b),
                                          new, state)
         buffers = tuple(lax.dynamic_update_index_in_dim(b, x, i, axis) for b, x in zip(buffers, pack(out)))
         taken = lax.dynamic_update_index_in_dim(taken, do, i, axis)
-        failed = jnp.any(do & (out.result != int(Result.successful)))
-        return i + 1, new, stopped | (failed & stop_on_failure), buffers, taken
+        if stop_on_failure is not False:  # a batch never stops: leave the test out of its loop
+            stopped = stopped | (jnp.any(out.result != int(Result.successful)) & stop_on_failure)
+        return i + 1, new, stopped, buffers, taken
 
     init = (jnp.zeros((), jnp.int32), state, jnp.zeros((), bool), buffers, taken)
     _, state, _, buffers, taken = lax.while_loop(going, body, init)
