@@ -41,10 +41,13 @@ class Solution(eqx.Module):
             ``SaveAt.fn`` chose what to keep.
         records: the stacked :class:`~nsga_jax.StepOutput` of the kept rows,
             or what ``SaveAt.fn`` returned for them.
-        result: the first failure's :data:`~nsga_jax.results.Result`
-            (``successful`` if none) from the host drivers; its code (an int32
-            array, :func:`~nsga_jax.results.from_code` gives the
-            :data:`~nsga_jax.RESULTS` member) from :func:`~nsga_jax.integrate`.
+        result: the code of the first failed step's result (``successful``'s
+            if none), from every driver: ``Result(int(sol.result))`` names
+            it. The host drivers return it decoded, as the
+            :data:`~nsga_jax.results.Result` member (an ``IntEnum``: the code
+            itself); :func:`~nsga_jax.integrate` as an int32 JAX scalar
+            (:func:`~nsga_jax.results.from_code` gives the
+            :data:`~nsga_jax.RESULTS` member under ``jit``).
         stats: statistics over every step (:func:`host_stats`,
             :func:`traced_stats`): Newton iterations per sub-problem, failed
             steps, constraint violations; from the host drivers also the

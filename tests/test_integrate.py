@@ -57,6 +57,27 @@ def test_integrate_under_vmap_equals_simulate_per_member():
         assert_same_run(member, host)
 
 
+def test_every_driver_reports_a_failing_run_with_the_same_fields():
+    """One run core: a run whose position correction fails on some steps
+    (an iteration cap of 1), kept going, gives the same trajectory, result,
+    failure count, per-step result codes and statistics from the three
+    drivers (the batch's single member, integrate under jit)."""
+    scene = load_scene("rigid_pendulum", {"max_iter": 1, "t_end": 2.0})
+    t1, h = scene.solver["t_end"], scene.solver["h"]
+    host = scene.run(throw=False)
+    member = nj.simulate_batch(scene.model, scene.scheme(), 0.0, t1, [h], scene.q0, scene.v0)[0]
+    pure = jax.jit(lambda q0, v0: nj.integrate(scene.model, scene.scheme(), 0.0, t1, h, q0, v0, throw=False))(
+        scene.q0, scene.v0)
+    assert host.stats["failed_steps"] > 0 and host.result == nj.Result.position_max_iter
+    for sol in (member, pure):
+        assert_same_run(sol, host)
+        assert nj.Result(int(sol.result)) is host.result
+        np.testing.assert_array_equal(np.asarray(sol.records.result), host.records.result)
+        assert sol.n_steps == host.n_steps == sol.n_steps_requested
+    np.testing.assert_array_equal(member.failed_steps, host.failed_steps)
+    np.testing.assert_array_equal(np.nonzero(np.asarray(pure.records.result))[0], host.failed_steps)
+
+
 def test_saveat_every_equals_slicing_the_full_run():
     run = jax.jit(lambda saveat: nj.integrate(BALL, nj.DS(), 0.0, 0.5, 1e-3, 0.2 * jnp.ones(1), jnp.zeros(1),
                                               saveat=saveat), static_argnums=0)
