@@ -29,11 +29,11 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from ._compat import bounded_lapack_batches, process_allgather, same_treedef, shard_members
 from ._run_core import prepare_and_init, run_chunk
 from ._simulate import chunk_length, prepend_initial
 from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
-from .integrators.linalg import bounded_lapack_batches
 from .integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
 from .memory import check_fits
 from .models.base import Model
@@ -50,7 +50,7 @@ MEMBERS = "members"
 
 def needs_bounded_lapack_batches(mesh: Mesh | None) -> bool:
     """Whether a batch split over ``mesh`` is traced with
-    :func:`~nsga_jax.integrators.linalg.bounded_lapack_batches`: when its
+    :func:`~nsga_jax._compat.bounded_lapack_batches`: when its
     members run on several CPU devices at once, where jaxlib 0.10's large
     batched LAPACK calls can deadlock XLA's shared thread pool."""
     return mesh is not None and mesh.size > 1 and mesh.devices.flat[0].platform == "cpu"
@@ -90,17 +90,16 @@ def same_structure(a: Model, b: Model) -> bool:
     its static part: a contact without friction has ``mu=None`` where one
     with friction has an array, and both leave ``None`` in the static part."""
     # jaxlib declares no type for its compiled PyTreeDef, so mypy cannot see that it compares
-    if jax.tree_util.tree_structure(a) != jax.tree_util.tree_structure(b):  # type: ignore[operator]
+    if not same_treedef(a, b):
         return False
     da, sa = eqx.partition(a, eqx.is_array)
     db, sb = eqx.partition(b, eqx.is_array)
-    if jax.tree_util.tree_structure(da) != jax.tree_util.tree_structure(db):  # type: ignore[operator]
+    if not same_treedef(da, db):
         return False
     if any((x.shape, x.dtype) != (y.shape, y.dtype)
            for x, y in zip(jax.tree_util.tree_leaves(da), jax.tree_util.tree_leaves(db))):
         return False
-    return bool(jax.tree_util.tree_structure(sa) == jax.tree_util.tree_structure(sb)  # type: ignore[operator]
-                and eqx.tree_equal(sa, sb))
+    return same_treedef(sa, sb) and bool(eqx.tree_equal(sa, sb))
 
 
 def broadcast_members(tree, n: int):
@@ -122,7 +121,7 @@ def _on_devices(fn, mesh: Mesh | None):
     if mesh is None:
         return fn
     spec = PartitionSpec(MEMBERS)
-    return jax.shard_map(fn, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+    return shard_members(fn, mesh, spec)
 
 
 @functools.cache
@@ -166,9 +165,7 @@ def _place(tree, mesh: Mesh | None):
 def _to_host(tree):
     """NumPy copies of (possibly multi-host) arrays, whole on every process."""
     if jax.process_count() > 1:
-        from jax.experimental import multihost_utils
-
-        tree = multihost_utils.process_allgather(tree, tiled=True)
+        tree = process_allgather(tree)
     return jax.device_get(tree)
 
 

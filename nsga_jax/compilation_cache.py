@@ -24,7 +24,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import jax
-from jax.experimental.compilation_cache import compilation_cache as _jax_cache
+
+from ._compat import jax_option, reset_compilation_cache
 
 ENV = "NSGA_JAX_CACHE"
 OFF = ("off", "0", "no", "false", "none")
@@ -52,15 +53,14 @@ def use_compilation_cache(path: str | Path | None) -> Path | None:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_SECONDS)
         jax.config.update("jax_enable_compilation_cache", True)
     jax.config.update("jax_compilation_cache_dir", None if path is None else str(path))
-    _jax_cache.reset_cache()
+    reset_compilation_cache()
     return path
 
 
 def current_cache_dir() -> Path | None:
     """The folder of the persistent cache in use, or ``None``."""
-    # JAX's Config defines its options as attributes at run time: none is declared to mypy
-    path = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]
-    return Path(path) if path and jax.config.jax_enable_compilation_cache else None  # type: ignore[attr-defined]
+    path = jax_option("jax_compilation_cache_dir")
+    return Path(path) if path and jax_option("jax_enable_compilation_cache") else None
 
 
 @contextlib.contextmanager

@@ -56,9 +56,9 @@ def agree(flag: bool) -> bool:
     """Process 0's ``flag``, in every process (the flag itself with one process)."""
     if jax.process_count() == 1:
         return bool(flag)
-    from jax.experimental import multihost_utils
+    from ._compat import broadcast_one_to_all
 
-    return bool(multihost_utils.broadcast_one_to_all(np.asarray(flag, dtype=np.int32)))
+    return bool(broadcast_one_to_all(np.asarray(flag, dtype=np.int32)))
 
 
 __all__ = ["agree", "initialize", "parse_address"]

@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._compat import jax_option
 from .results import ConfigError
 
 DTYPES = ("float64", "float32")
@@ -31,8 +32,7 @@ X64_CALL = ('call nsga_jax.configure_jax() (or jax.config.update("jax_enable_x64
 
 def x64_enabled() -> bool:
     """Whether JAX's 64-bit mode is on (nsga_jax never turns it on itself)."""
-    # JAX's Config defines its options as attributes at run time: none is declared to mypy
-    return bool(jax.config.jax_enable_x64)  # type: ignore[attr-defined]
+    return bool(jax_option("jax_enable_x64"))
 
 
 def require_x64_for(dtype: str) -> None:

@@ -99,11 +99,11 @@ def _build() -> tuple[Any, Any]:
     :data:`FAILURES`) and :data:`Result` (its members and codes as a :class:`HostResult`)."""
     import optimistix as optx
 
-    namespace: dict[str, Any] = {"__module__": __name__, **FAILURES}
-    namespace["__doc__"] = ("Results of a step inside compiled code: ``optimistix.RESULTS`` and a member per "
-                            "failure (:data:`nsga_jax.results.FAILURES`).")
-    meta: Any = type(optx.RESULTS)  # equinox's enumeration metaclass: builds the members from the namespace
-    enumeration = meta("RESULTS", (optx.RESULTS,), namespace)
+    from ._compat import extend_enumeration
+
+    enumeration = extend_enumeration(optx.RESULTS, "RESULTS", FAILURES, __name__,
+                                     "Results of a step inside compiled code: ``optimistix.RESULTS`` and a member "
+                                     "per failure (:data:`nsga_jax.results.FAILURES`).")
     codes = {name: int(code_of(getattr(enumeration, name))) for name in enumeration._name_to_item}
     make: Any = HostResult  # the functional Enum API: a subclass with these members
     return enumeration, make("Result", codes, module=__name__)

@@ -15,8 +15,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "nsga_jax"
 
 LAYERS: list[tuple[str, set[str]]] = [
     # (layer, top-level modules or subpackages of nsga_jax), from the bottom up
-    ("foundation", {"_custom_types", "_util", "results", "validation", "precision", "compilation_cache", "packaged",
-                    "process_settings"}),
+    ("foundation", {"_compat", "_custom_types", "_util", "results", "validation", "precision", "compilation_cache",
+                    "packaged", "process_settings"}),
     ("physics", {"elements", "assembly", "blocks", "models", "system", "exact", "exact_pendulums"}),
     ("numerics", {"integrators", "adjoint", "impact_time", "impact_time_friction"}),
     ("runs", {"saveat", "_integrate", "_simulate", "_run_core", "solution", "monitors", "diagnosis", "batch",

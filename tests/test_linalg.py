@@ -124,14 +124,8 @@ def test_bounded_lapack_batches_chunk_a_vmapped_batch_with_the_same_results(n, c
     batched calls deadlock jaxlib 0.10 on several CPU devices): 27 × 27
     matrices one per call, small ones still in one batched call; the results
     are the batched ones."""
-    from nsga_jax.integrators.linalg import (
-        LAPACK_WORK_PER_CALL,
-        Tridiagonal,
-        band_matrix,
-        bounded_lapack_batches,
-        dense_solve,
-        masked_solve,
-    )
+    from nsga_jax._compat import LAPACK_WORK_PER_CALL, bounded_lapack_batches
+    from nsga_jax.integrators.linalg import Tridiagonal, band_matrix, dense_solve, masked_solve
 
     def work(shape):
         return np.prod(shape[:-2], dtype=int) * shape[-1] ** 3

@@ -9,7 +9,7 @@ device, and prints the wall time per matrix and the CPU seconds its threads spen
 on XLA's intra-op pool threads (``tf_XLAEigen``) when the kernel split the
 batch over them. A split call blocks its thread until the parts are done,
 which is what deadlocks several host devices running such calls at once
-(``nsga_jax.integrators.linalg.bounded_lapack_batches`` keeps each call's
+(``nsga_jax._compat.bounded_lapack_batches`` keeps each call's
 work, B n³, well below the smallest split seen here). Linux only.
 """
 

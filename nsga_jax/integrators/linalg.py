@@ -21,11 +21,8 @@ active set. A must be non-singular, which holds when M is positive definite.
 from __future__ import annotations
 
 import abc
-import contextlib
-import contextvars
-import functools
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import cast
 
 import equinox as eqx
@@ -33,100 +30,31 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
+from .._compat import lapack_batches_bounded
 from .._custom_types import ActiveSet, Matrix, Scalar, Vector
 
 Solve = Callable[[jax.Array], jax.Array]
 """``X -> A^{-1} X`` for X of shape (n,) or (n, m)."""
 
-LAPACK_WORK_PER_CALL = 2**15
-"""The most work (matrices × n³) one LAPACK call is given under
-:func:`bounded_lapack_batches`: a fifth of the most that jaxlib 0.10.2's CPU
-LU was seen to run on its calling thread. It split batches of 2.2e5 and more
-over its thread pool (128 matrices of 12 × 12, 16 of 27 × 27), and none of
-1.6e5 or less (8 of 27 × 27, 32 of 16 × 16;
-``experiments/tools/lapack_batch_threads.py``)."""
-
-_BOUNDED = contextvars.ContextVar("nsga_jax_bounded_lapack_batches", default=False)
-
-
-@contextlib.contextmanager
-def bounded_lapack_batches(enabled: bool = True) -> Iterator[None]:
-    """Trace this module's LAPACK calls (LU factorisations and solves,
-    inverses) so that ``vmap`` over them hands LAPACK at most
-    :data:`LAPACK_WORK_PER_CALL` of work per call: a batch of large matrices
-    becomes a loop over chunks (one matrix per call for the flexible
-    pendulum's 27 × 27), a batch of small ones stays one call.
-
-    jaxlib 0.10's CPU LAPACK kernels split a large batch over XLA's intra-op
-    thread pool and block their thread until the parts are done. When several
-    host devices run such calls at once, every thread of the pool can be
-    blocked that way with none left to do the parts: the flexible pendulum's
-    batch of 64 on 2 forced CPU devices deadlocked so (both pool threads
-    waiting in ``lapack_dgetrf``). A call below the splitting size runs on
-    its own thread and cannot wait on the pool.
-    :class:`~nsga_jax.batch.BatchRun` traces a batch split over several CPU
-    devices with this on. The calls are the same LAPACK routines.
-
-    The setting is read when a function is traced: a jitted function traced
-    earlier keeps the trace it had (jit a separate function object for each
-    setting). Only the innermost ``vmap`` over a call is chunked.
-    """
-    token = _BOUNDED.set(enabled)
-    try:
-        yield
-    finally:
-        _BOUNDED.reset(token)
-
-
-def _lapack(fn):
-    """``fn`` (a LAPACK-backed function of arrays whose first argument is the
-    matrix, shape (..., n, n)), whose ``vmap`` is chunked when traced under
-    :func:`bounded_lapack_batches`."""
-    chunked = jax.custom_batching.custom_vmap(fn)
-
-    @chunked.def_vmap
-    def rule(axis_size, in_batched, *args):
-        matrix = args[0]
-        work = math.prod(matrix.shape[int(in_batched[0]):-2]) * matrix.shape[-1] ** 3
-        chunk = max(1, min(axis_size, LAPACK_WORK_PER_CALL // max(work, 1)))
-        batched = [a for a, b in zip(args, in_batched) if b]
-
-        def call(members):
-            it = iter(members)
-            return fn(*[next(it) if b else a for a, b in zip(args, in_batched)])
-
-        if chunk == axis_size:
-            out = jax.vmap(call)(batched)
-        else:
-            out = jax.lax.map(call, batched, batch_size=chunk)
-        return out, jax.tree_util.tree_map(lambda _: True, out)
-
-    @functools.wraps(fn)
-    def dispatch(*args):
-        return (chunked if _BOUNDED.get() else fn)(*args)
-
-    return dispatch
-
-
-@_lapack
+@lapack_batches_bounded
 def lu_factor(matrix: Matrix) -> tuple[Matrix, jax.Array]:
     """``jax.scipy.linalg.lu_factor``: the LU factors (n, n) and pivots (n,)."""
     return jsl.lu_factor(matrix)
 
 
-@_lapack
+@lapack_batches_bounded
 def lu_solve(lu: Matrix, pivots: jax.Array, rhs: jax.Array) -> jax.Array:
     """``jax.scipy.linalg.lu_solve``: A^{-1} rhs from A's LU factors."""
     return jsl.lu_solve((lu, pivots), rhs)
 
 
-@_lapack
+@lapack_batches_bounded
 def linear_solve(matrix: Matrix, rhs: jax.Array) -> jax.Array:
     """``jnp.linalg.solve``: matrix^{-1} rhs."""
     return jnp.linalg.solve(matrix, rhs)
 
 
-@_lapack
+@lapack_batches_bounded
 def inverse(matrix: Matrix) -> Matrix:
     """``jnp.linalg.inv`` of a matrix or a stack of them, shape (..., n, n)."""
     return jnp.linalg.inv(matrix)
