@@ -325,12 +325,24 @@ def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> tup
     return jax.tree_util.tree_map(lambda x: x[keep], records), numbers[keep]
 
 
-def prepend_initial(model: Model, chunks: list[StepOutput], t0, q0, v0) -> StepOutput:
-    """Concatenate the chunks after a zero record holding the initial state."""
+def constraints_at(model: Model, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The unilateral gaps [m] (nu,) and bilateral values (nb,) at q (n,)."""
+    return model.unilateral(q), model.bilateral(q)
+
+
+# one compiled call (op by op, a system's constraints took 3 ms); every model of one structure shares it
+_constraints_at_jit = eqx.filter_jit(constraints_at)
+
+
+def prepend_initial(model: Model, chunks: list[StepOutput], t0, q0, v0, constraints=None) -> StepOutput:
+    """Concatenate the chunks after a zero record holding the initial state;
+    ``constraints``: its (gaps, bilateral values) where known (a batch
+    computes every member's at once), else computed here."""
     first = chunks[0]
     init = jax.tree_util.tree_map(lambda x: np.zeros((1,) + x.shape[1:], x.dtype), first)
-    gap = np.asarray(model.unilateral(jnp.asarray(q0)))
-    bil = np.asarray(model.bilateral(jnp.asarray(q0)))
+    if constraints is None:
+        constraints = _constraints_at_jit(model, jnp.asarray(q0))
+    gap, bil = (np.asarray(x) for x in jax.device_get(constraints))
     init = eqx.tree_at(
         lambda r: (r.t, r.q, r.v, r.gap, r.bilateral),
         init,

@@ -31,7 +31,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._compat import bounded_lapack_batches, process_allgather, same_treedef, shard_members
 from ._run_core import prepare_and_init, run_chunk
-from ._simulate import chunk_length, prepend_initial
+from ._simulate import chunk_length, constraints_at, prepend_initial
 from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
@@ -146,6 +146,9 @@ def _prepare_members(*members):
     return lax.map(one, members)
 
 
+_members_constraints = eqx.filter_jit(jax.vmap(constraints_at))  # every member's at q0 in one call
+
+
 def _place(tree, mesh: Mesh | None):
     """Array leaves as global arrays split over the mesh's member axis (each
     process supplies its own devices' slices, so this works across hosts)."""
@@ -201,6 +204,8 @@ class BatchRun:
         jax.block_until_ready(self._carry)
         self.wall_time = time.perf_counter() - tw
         self._args = (args[0], args[1])
+        self.initial_constraints = _to_host(_members_constraints(args[0], args[3]))
+        """Every member's (gaps (B, nu), bilateral values (B, nb)) at q0, NumPy."""
         self._template = output_template(model, self._carry.q.dtype, scheme.subproblems)
         self._hs = np.asarray(hs)
         self._t0 = float(t0)
@@ -239,13 +244,15 @@ class BatchRun:
 
 
 def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float, n_steps_requested: int,
-                    run: BatchRun, totals: RunTotals | None = None, warnings: list[str] | None = None) -> Solution:
-    """One member's :class:`Solution` from its (NumPy) records. Without
+                    run: BatchRun, index: int, totals: RunTotals | None = None,
+                    warnings: list[str] | None = None) -> Solution:
+    """Member ``index``'s :class:`Solution` from its (NumPy) records. Without
     ``totals`` the records hold every step and give the statistics and the
     first failure; with them (records strided) those come from ``totals``.
     ``warnings``: notes of the run kept in ``Solution.warnings`` (the
     redundancy of its constraints)."""
-    records = prepend_initial(model, chunks, t0, q0, v0)
+    initial = tuple(x[index] for x in run.initial_constraints)
+    records = prepend_initial(model, chunks, t0, q0, v0, constraints=initial)
     if totals is None:
         bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
         result = Result(int(records.result[bad[0]])) if bad.size else Result.successful
@@ -311,7 +318,7 @@ def simulate_batch(
             if done[b].any():
                 chunks[b].append(jax.tree_util.tree_map(lambda x: x[b][done[b]], out))
     return [with_observables(member_solution(model, chunks[b], t0, q0.astype(dtype), v0.astype(dtype),
-                                             float(hs[b]), int(n_steps[b]), run, warnings=notes), observables)
+                                             float(hs[b]), int(n_steps[b]), run, b, warnings=notes), observables)
             for b in range(B)]
 
 

@@ -146,7 +146,7 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
         scene = member.scene
         mine = jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)
         sol = member_solution(scene.model, [mine], 0.0, scene.q0.astype(dtype), scene.v0.astype(dtype),
-                              float(hs[b]), int(n_steps[b]), run, totals=totals[b])
+                              float(hs[b]), int(n_steps[b]), run, b, totals=totals[b])
         rows.append(_row(member, sol))
     return rows, run.compile_time, run.wall_time
 
