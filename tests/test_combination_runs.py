@@ -480,3 +480,15 @@ def test_identify_on_the_matrix_free_path():
     result = identify("flexible_cube", ["E"], data, overrides=settings, initial={"E": 1.1 * true["E"]}, true=true)
     assert abs(result.recovered["E"] / true["E"] - 1) < 1e-2, (result.recovered, result.stop)
     assert result.converged and result.losses[-1] < 1e-3 * result.losses[0]
+
+
+def test_stack_models_under_jit_equals_stacking_concrete_models():
+    """stack_models stacks concrete members on the host and traced ones with
+    jnp.stack: the same model either way."""
+    balls = [nj.BouncingBall(m=m, gravity=9.81, e=0.5) for m in (1.0, 2.0, 3.0)]
+    concrete = stack_models(balls)
+    traced = jax.jit(lambda ms: stack_models([nj.BouncingBall(m=m, gravity=9.81, e=0.5) for m in ms]))(
+        jnp.asarray([1.0, 2.0, 3.0]))
+    assert concrete.m.shape == (3,) and concrete.m.dtype == traced.m.dtype
+    np.testing.assert_array_equal(concrete.m, traced.m)
+    np.testing.assert_array_equal(concrete.e, [0.5, 0.5, 0.5])
