@@ -71,8 +71,9 @@ def run_chunk(model: Model, scheme: AbstractScheme, ops: Operators, state: StepS
     counter on the device passes a chunk's length), or stops after the first
     failed step when ``stop_on_failure``.
 
-    With ``members=True`` every argument but ``length`` has a leading member
-    axis (B,): the step is ``vmap``-ed inside the loop (not the loop under
+    With ``members=True`` every argument but ``stop_on_failure`` and
+    ``length`` has a leading member axis (B,) (a batch passes
+    ``stop_on_failure=False``: one failed member never stops the others): the step is ``vmap``-ed inside the loop (not the loop under
     ``vmap``, which would carry and select the whole record buffer at every
     step), member b takes ``steps[b]`` steps and then keeps its state, and
     the buffers are (B, length, fields).
