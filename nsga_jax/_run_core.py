@@ -73,10 +73,11 @@ def run_chunk(model: Model, scheme: AbstractScheme, ops: Operators, state: StepS
 
     With ``members=True`` every argument but ``stop_on_failure`` and
     ``length`` has a leading member axis (B,) (a batch passes
-    ``stop_on_failure=False``: one failed member never stops the others): the step is ``vmap``-ed inside the loop (not the loop under
-    ``vmap``, which would carry and select the whole record buffer at every
-    step), member b takes ``steps[b]`` steps and then keeps its state, and
-    the buffers are (B, length, fields).
+    ``stop_on_failure=False``: one failed member never stops the others):
+    the step is ``vmap``-ed inside the loop (not the loop under ``vmap``,
+    which would carry and select the whole record buffer at every step),
+    member b takes ``steps[b]`` steps and then keeps its state, and the
+    buffers are (B, length, fields).
 
     Returns the state after the chunk and ``(buffers, taken)``: the packed
     records and the mask of the rows that hold a step taken, (length,) or
