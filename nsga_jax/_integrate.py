@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ._run_core import advance, prepare_and_init
+from ._run_core import advance, constraints_at, prepare_and_init
 from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
 from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
@@ -89,8 +89,7 @@ def _initial_record(model: Model, subproblems: tuple[str, ...], t0, q0, v0, dtyp
     """The row of t0: the initial state, its gaps and bilateral values, zero
     multipliers, iterations and result."""
     zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), output_template(model, dtype, subproblems))
-    return eqx.tree_at(lambda r: (r.t, r.q, r.v, r.gap, r.bilateral), zeros,
-                       (t0, q0, v0, model.unilateral(q0), model.bilateral(q0)))
+    return eqx.tree_at(lambda r: (r.t, r.q, r.v, r.gap, r.bilateral), zeros, (t0, q0, v0, *constraints_at(model, q0)))
 
 
 def integrate(

@@ -16,7 +16,8 @@ loop:
   is the same loop with the step ``vmap``-ed over a leading member axis.
 
 :func:`prepare_and_init` is the one preparation: the scheme's constant
-operators at (h, t0) and its state at t0.
+operators at (h, t0) and its state at t0; :func:`constraints_at` gives the
+gaps and bilateral values of every driver's initial record row.
 """
 
 from __future__ import annotations
@@ -41,6 +42,12 @@ def prepare_and_init(model: Model, scheme: AbstractScheme, t0, q0, v0, h) -> tup
     ops = scheme.prepare(model, h, t0)
     state = scheme.init(model, t0, q0, v0)
     return ops, state
+
+
+def constraints_at(model: Model, q) -> tuple[jax.Array, jax.Array]:
+    """The unilateral gaps [m] (nu,) and bilateral values (nb,) at q (n,):
+    the initial row of every driver's records."""
+    return model.unilateral(q), model.bilateral(q)
 
 
 def advance(model: Model, scheme: AbstractScheme, ops: Operators, state: StepState, t, h, *,
@@ -84,7 +91,10 @@ def run_chunk(model: Model, scheme: AbstractScheme, ops: Operators, state: StepS
     (B, length). Runs with another h or another number of steps reuse the
     compilation.
     """
-    one = lambda m, s, o, st, t, hh: advance(m, s, o, st, t, hh)[:2]  # noqa: E731
+    def one(model, scheme, ops, state, t, h):
+        new, out, _ = advance(model, scheme, ops, state, t, h)
+        return new, out
+
     step = jax.vmap(one) if members else one
     n_float, n_int = packed_sizes(output_template(model, state.q.dtype, scheme.subproblems))
     rows = (h.shape[0], length) if members else (length,)

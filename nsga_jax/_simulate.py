@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._run_core import prepare_and_init, run_chunk
+from ._run_core import constraints_at, prepare_and_init, run_chunk
 from .chunks import RecordFiles, chunk_length, chunk_plan
 from .compilation_cache import cache_events, compile_source
 from .diagnosis import FLOAT32_HINT, nonfinite_origin
@@ -325,12 +325,8 @@ def _every(records: StepOutput, first_step: int, k: int, keep_last: bool) -> tup
     return jax.tree_util.tree_map(lambda x: x[keep], records), numbers[keep]
 
 
-def constraints_at(model: Model, q: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """The unilateral gaps [m] (nu,) and bilateral values (nb,) at q (n,)."""
-    return model.unilateral(q), model.bilateral(q)
-
-
-# one compiled call (op by op, a system's constraints took 3 ms); every model of one structure shares it
+# one compiled call, shared by every model of one structure: op by op, the box stack's constraints took
+# 2.0 s on first use (each operation compiled) and 22 ms after; compiled, 0.23 s and 0.3 ms
 _constraints_at_jit = eqx.filter_jit(constraints_at)
 
 

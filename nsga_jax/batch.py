@@ -30,8 +30,8 @@ from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._compat import bounded_lapack_batches, process_allgather, same_treedef, shard_members
-from ._run_core import prepare_and_init, run_chunk
-from ._simulate import chunk_length, constraints_at, prepend_initial
+from ._run_core import constraints_at, prepare_and_init, run_chunk
+from ._simulate import chunk_length, prepend_initial
 from .first_step import LIMIT_SECONDS, check_first_step
 from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
@@ -98,7 +98,6 @@ def same_structure(a: Model, b: Model) -> bool:
     (their arrays may differ in value). The whole tree is compared, not only
     its static part: a contact without friction has ``mu=None`` where one
     with friction has an array, and both leave ``None`` in the static part."""
-    # jaxlib declares no type for its compiled PyTreeDef, so mypy cannot see that it compares
     if not same_treedef(a, b):
         return False
     da, sa = eqx.partition(a, eqx.is_array)
@@ -188,7 +187,9 @@ class BatchRun:
     :class:`StepOutput` with leaves of shape (B, L, ...) and the mask (B, L) of
     the steps each member took. ``compile_time`` and ``wall_time`` [s] are
     those of the whole batch (wall time: preparation and chunks until their
-    results are ready, not the copies to the host).
+    results are ready, not the copies to the host). ``initial_constraints``:
+    every member's gaps (B, nu) [m] and bilateral values (B, nb) at q0
+    (NumPy), computed in one call for the records' initial rows.
     """
 
     def __init__(self, model: Model, scheme: AbstractScheme, t0, q0, v0, hs, n_steps, *,
@@ -214,7 +215,6 @@ class BatchRun:
         self.wall_time = time.perf_counter() - tw
         self._args = (args[0], args[1])
         self.initial_constraints = _to_host(_members_constraints(args[0], args[3]))
-        """Every member's (gaps (B, nu), bilateral values (B, nb)) at q0, NumPy."""
         self._template = output_template(model, self._carry.q.dtype, scheme.subproblems)
         self._hs = np.asarray(hs)
         self._t0 = float(t0)
