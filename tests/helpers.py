@@ -3,8 +3,9 @@
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from reference_models import ElasticBar
 
-from nsga_jax.models import ElasticBar, Model
+from nsga_jax.models import Model
 
 
 class Oscillator(Model):

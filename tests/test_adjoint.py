@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from helpers import spd_system
 from jax.extend import core as jcore
+from reference_models import BouncingBall
 
 import nsga_jax as nj
 from nsga_jax.integrators.linalg import Factorisation
@@ -105,7 +106,7 @@ def test_vmap_of_grad_equals_a_loop_of_grads():
 
 
 def ball():
-    return nj.BouncingBall(m=1.0, gravity=9.81, e=0.5), jnp.ones(1), jnp.zeros(1)
+    return BouncingBall(m=1.0, gravity=9.81, e=0.5), jnp.ones(1), jnp.zeros(1)
 
 
 @pytest.mark.parametrize("adjoint", [nj.DiscreteAdjoint(), nj.ImpactTimeAdjoint()], ids=["discrete", "event"])

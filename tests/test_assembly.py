@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import GenericBar
+from reference_models import ElasticBar
 
 import nsga_jax as nj
 from nsga_jax.elements import bar_internal_force
@@ -24,7 +25,7 @@ def test_element_tangent_matches_finite_differences():
 
 
 def test_assembled_bar_matrices():
-    model = nj.ElasticBar(**BAR)
+    model = ElasticBar(**BAR)
     n = model.n_dof
     q = jnp.zeros(n)
     K, C = model.tangents(q, q, 0.0)
@@ -42,7 +43,7 @@ def test_assembled_bar_matrices():
 
 
 def test_fast_path_equals_generic_path():
-    fast_model = nj.ElasticBar(**BAR)
+    fast_model = ElasticBar(**BAR)
     generic_model = GenericBar(**BAR)
     q0, v0 = np.zeros(fast_model.n_dof), np.full(fast_model.n_dof, 10.0)
     fast = nj.simulate(fast_model, nj.DS(), 0.0, 1.3, 2e-3, q0, v0)

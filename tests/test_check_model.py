@@ -3,6 +3,7 @@ wrong structure flag is caught with a message naming the flag."""
 
 import jax.numpy as jnp
 import pytest
+from reference_models import ElasticBar, RigidPendulum
 
 import nsga_jax as nj
 from nsga_jax.scenes import REGISTRY, load_scene
@@ -29,7 +30,7 @@ def test_the_worked_example_model_keeps_its_declarations():
 PENDULUM = dict(m=1.0, length=1.0, gravity=9.81, wall_x=-0.5, side=1.0, e=0.5)
 
 
-class MassGrowsWithHeight(nj.RigidPendulum):
+class MassGrowsWithHeight(RigidPendulum):
     def mass(self, q):
         return self.m * (1.0 + q[1] ** 2) * jnp.eye(2, dtype=q.dtype)
 
@@ -37,21 +38,21 @@ class MassGrowsWithHeight(nj.RigidPendulum):
         return self.mass(q) @ x
 
 
-class CubicSpring(nj.RigidPendulum):
+class CubicSpring(RigidPendulum):
     def force(self, q, v, t):
         return -self.m * q**3
 
 
-class Damped(nj.RigidPendulum):
+class Damped(RigidPendulum):
     def force(self, q, v, t):
         return -0.1 * v
 
 
-class AffineRod(nj.RigidPendulum):
+class AffineRod(RigidPendulum):
     linear_constraints = True
 
 
-class Diagonal(nj.ElasticBar):
+class Diagonal(ElasticBar):
     @property
     def bandwidth(self):
         return 0

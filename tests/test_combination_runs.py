@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from reference_models import BouncingBall
 from scipy.integrate import solve_ivp
 from test_integrate import assert_same_run
 from test_rigid_box import euler_reference
@@ -485,9 +486,9 @@ def test_identify_on_the_matrix_free_path():
 def test_stack_models_under_jit_equals_stacking_concrete_models():
     """stack_models stacks concrete members on the host and traced ones with
     jnp.stack: the same model either way."""
-    balls = [nj.BouncingBall(m=m, gravity=9.81, e=0.5) for m in (1.0, 2.0, 3.0)]
+    balls = [BouncingBall(m=m, gravity=9.81, e=0.5) for m in (1.0, 2.0, 3.0)]
     concrete = stack_models(balls)
-    traced = jax.jit(lambda ms: stack_models([nj.BouncingBall(m=m, gravity=9.81, e=0.5) for m in ms]))(
+    traced = jax.jit(lambda ms: stack_models([BouncingBall(m=m, gravity=9.81, e=0.5) for m in ms]))(
         jnp.asarray([1.0, 2.0, 3.0]))
     assert concrete.m.shape == (3,) and concrete.m.dtype == traced.m.dtype
     np.testing.assert_array_equal(concrete.m, traced.m)

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from reference_models import PlanarBeam
 
 from nsga_jax.elements.beam2d import beam_internal_force
 from nsga_jax.elements.hex8 import hex8_geometry, hex8_internal_force, lame, structured_hex_mesh
@@ -17,7 +18,6 @@ from nsga_jax.elements.rigid_body import (
     point_position,
     rigidity_constraints,
 )
-from nsga_jax.models.beam2d import PlanarBeam
 
 
 def fd_jacobian(f, x, eps=1e-6):

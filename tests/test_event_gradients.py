@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from reference_models import BouncingBall
 
 import nsga_jax as nj
 from nsga_jax.adjoint import adjoint_named
@@ -129,5 +130,5 @@ def test_unknown_adjoint_is_refused():
 def test_adjoint_must_be_an_instance(given, shown):
     with pytest.raises(TypeError, match=rf"adjoint must be an adjoint instance: nsga_jax.DiscreteAdjoint\(\) "
                                         rf"or nsga_jax.ImpactTimeAdjoint\(\), got {shown}"):
-        nj.integrate(nj.BouncingBall(m=1.0, gravity=G, e=0.5), nj.DS(), 0.0, 0.01, 1e-3, jnp.ones(1),
+        nj.integrate(BouncingBall(m=1.0, gravity=G, e=0.5), nj.DS(), 0.0, 0.01, 1e-3, jnp.ones(1),
                      jnp.zeros(1), adjoint=given)

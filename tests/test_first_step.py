@@ -9,6 +9,7 @@ import re
 from types import SimpleNamespace
 
 import pytest
+from reference_models import BouncingBall
 
 import nsga_jax as nj
 from nsga_jax import first_step, memory
@@ -16,7 +17,7 @@ from nsga_jax.chunks import chunk_plan
 from nsga_jax.cli import EXIT_INPUT, main
 from nsga_jax.scenes import load_scene
 
-BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.5)
+BALL = BouncingBall(m=1.0, gravity=9.81, e=0.5)
 DENSE = nj.DS(krylov_min_dof=None)
 """DS on its dense path (a large matrix-free model is otherwise solved without assembling)."""
 RATE = first_step.LU_RATE

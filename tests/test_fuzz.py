@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from reference_models import BouncingBall, ElasticBar, RigidPendulum
 
 import nsga_jax as nj
 from nsga_jax._simulate import chunk_plan
@@ -24,7 +25,7 @@ from nsga_jax.folders import RUN_FILES
 from nsga_jax.scenes import load_scene
 from nsga_jax.validation import MAX_STEPS, time_grid
 
-BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.5)
+BALL = BouncingBall(m=1.0, gravity=9.81, e=0.5)
 
 
 def error_line(capsys) -> str:
@@ -69,11 +70,11 @@ def test_float32_time_is_t0_plus_k_h_not_accumulated():
 
 def test_models_refuse_what_their_physics_cannot_mean():
     with pytest.raises(nj.ConfigError, match=r"ElasticBar.n_elements must be an integer >= 1, got 0"):
-        nj.ElasticBar(E=900.0, rho=1.0, area=1.0, length=10.0, gap0=1.0, e=0.0, n_elements=0)
+        ElasticBar(E=900.0, rho=1.0, area=1.0, length=10.0, gap0=1.0, e=0.0, n_elements=0)
     with pytest.raises(nj.ConfigError, match=r"RigidPendulum.side must be \+1 or -1 .*got 0.0"):
-        nj.RigidPendulum(m=1.0, length=1.0, gravity=9.81, wall_x=0.3, side=0.0, e=0.5)
+        RigidPendulum(m=1.0, length=1.0, gravity=9.81, wall_x=0.3, side=0.0, e=0.5)
     with pytest.raises(nj.ConfigError, match=r"side must be \+1 or -1"):
-        nj.RigidPendulum(m=1.0, length=1.0, gravity=9.81, wall_x=0.3, side=0.5, e=0.5)
+        RigidPendulum(m=1.0, length=1.0, gravity=9.81, wall_x=0.3, side=0.5, e=0.5)
 
 
 # ------------------------------------------------------------ wrong input accepted
@@ -92,7 +93,7 @@ def test_models_refuse_what_their_physics_cannot_mean():
     ({"scheme": nj.DS}, TypeError, r"scheme must be a scheme instance.*the class DS \(an instance is needed: DS\(\)\)"),
     ({"scheme": "ds"}, TypeError, r"scheme must be a scheme instance.*got str 'ds'"),
     ({"model": "bouncing_ball"}, TypeError, r"model must be a model instance.*got str"),
-    ({"model": nj.BouncingBall}, TypeError, r"model must be a model instance.*the class BouncingBall"),
+    ({"model": BouncingBall}, TypeError, r"model must be a model instance.*the class BouncingBall"),
     ({"q0": "1.0"}, TypeError, r"q0 must be an array of 1 numbers, got str"),
     ({"v0": ["a"]}, TypeError, r"v0 must be an array of 1 numbers"),
     ({"on_chunk": 3}, TypeError, r"on_chunk must be a function or None"),

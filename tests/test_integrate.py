@@ -6,12 +6,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from reference_models import BouncingBall
 
 import nsga_jax as nj
 from nsga_jax.chunks import load_chunks
 from nsga_jax.scenes import load_scene, parametrize
 
-BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+BALL = BouncingBall(m=1.0, gravity=9.81, e=0.8)
 STAT_KEYS = ("failed_steps", "max_penetration", "max_bilateral_violation_position",
              "max_bilateral_violation_velocity")
 
@@ -173,7 +174,7 @@ jax.config.update("jax_enable_x64", True)
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 import nsga_jax as nj
 assert len(jax.devices()) == 2
-ball = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+ball = BouncingBall(m=1.0, gravity=9.81, e=0.8)
 h0 = jnp.asarray([0.3, 0.5, 0.7, 0.9])
 q0 = h0[:, None]  # the ball's one coordinate: its height [m]
 v0 = jnp.zeros_like(q0)

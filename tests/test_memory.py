@@ -8,6 +8,7 @@ import re
 
 import numpy as np
 import pytest
+from reference_models import BouncingBall
 
 import nsga_jax as nj
 from nsga_jax import memory
@@ -20,7 +21,7 @@ RECORDED = {3: (192, 0.65), 5: (648, 0.70), 7: (1536, 0.86), 9: (3000, 1.40), 11
 20 steps of DS at h = 1e-4 s with every sub-problem active
 (``experiments/tools/memory_peak.py``; the table of docs/performance.md)."""
 
-BALL = nj.BouncingBall(m=1.0, gravity=9.81, e=0.5)
+BALL = BouncingBall(m=1.0, gravity=9.81, e=0.5)
 CUBE_40 = r"flexible_cube: 1,[0-9]\d\d GB estimated for 206,763 coordinates .*21.3 GB available; use a smaller model"
 DENSE = nj.DS(krylov_min_dof=None)
 """DS on its dense path (a large cube is otherwise solved without assembling: test_krylov.py)."""

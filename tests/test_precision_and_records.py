@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+from reference_models import BouncingBall
 
 import nsga_jax as nj
 from nsga_jax.chunks import load_chunks
@@ -130,7 +131,7 @@ def test_float64_inputs_refused_by_integrate_with_x64_off():
     import jax
     import jax.numpy as jnp
 
-    ball = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+    ball = BouncingBall(m=1.0, gravity=9.81, e=0.8)
     with jax.enable_x64(False):
         with pytest.raises(nj.ConfigError, match="q0 is float64 but JAX's 64-bit mode is off"):
             nj.integrate(ball, nj.DS(), 0.0, 0.01, 1e-3, np.array([1.0]), np.array([0.0]))
@@ -147,7 +148,7 @@ def test_float64_only_computations_refused_with_x64_off():
     64-bit mode is off; a float32 scene is parametrized as float32."""
     import jax
 
-    ball = nj.BouncingBall(m=1.0, gravity=9.81, e=0.8)
+    ball = BouncingBall(m=1.0, gravity=9.81, e=0.8)
     with jax.enable_x64(False):
         with pytest.raises(nj.ConfigError, match="check_model computes in float64 and needs JAX's 64-bit mode"):
             nj.check_model(ball, np.array([1.0]), np.array([0.0]))

@@ -80,7 +80,7 @@ def _python_api_simulate(ns):
     sol = ns["sol"]
     assert sol.stats["failed_steps"] == 0
     assert "tip_force" in sol.observables
-    assert ns["model"].e == 0.8
+    assert float(ns["model"].contacts[0].e) == 0.8 and ns["model"].n_dof == 1
 
 
 def _python_api_saveat(ns):

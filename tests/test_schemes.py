@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from reference_models import BouncingBall
 
 import nsga_jax as nj
 from nsga_jax.scenes import load_scene
@@ -76,7 +77,7 @@ def test_moreau_jean_impact_law_and_theta():
     with pytest.raises(nj.ConfigError, match=r"theta must be in \[0, 1\]"):
         load_scene("bouncing_ball", {"scheme": "mj", "theta": 1.5})
     with pytest.raises(nj.ConfigError, match=r"theta must be in \[0, 1\]"):
-        nj.simulate(nj.BouncingBall(m=1.0, gravity=9.81, e=0.5), nj.MJ(theta=-0.1), 0.0, 1.0, 1e-3, [1.0], [0.0])
+        nj.simulate(BouncingBall(m=1.0, gravity=9.81, e=0.5), nj.MJ(theta=-0.1), 0.0, 1.0, 1e-3, [1.0], [0.0])
 
 
 def test_cs_reports_divergence_or_cap_with_a_named_error():

@@ -8,13 +8,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from reference_models import ElasticBar, PlanarBeam
+from reference_models import HexSolid as HexModel
 
 import nsga_jax as nj
 from nsga_jax.assembly import StaticIndex
 from nsga_jax.elements.hex8 import structured_hex_mesh
-from nsga_jax.models.bar import ElasticBar
-from nsga_jax.models.beam2d import PlanarBeam
-from nsga_jax.models.solid import HexSolid as HexModel
 from nsga_jax.scenes import load_scene, parametrize
 from nsga_jax.system import Bar, Beam2D, HexSolid, PlaneContact, System
 

@@ -153,7 +153,7 @@ def force_at(model: Model, q: Vector, v: Vector, t: Scalar) -> ForceAt:
     return ForceAt(q, v, model.force(q, v, t))
 
 
-class AbstractForce(eqx.Module):
+class AbstractForceTerm(eqx.Module):
     """The applied and internal force f(q, v, t), shape (n,) [N], and its
     tangents K = -∂f/∂q [N/m] and C = -∂f/∂v [N s/m], shape (n, n).
 
@@ -184,7 +184,7 @@ class AbstractForce(eqx.Module):
         return model.force(q, v, t)
 
 
-class NonlinearForce(AbstractForce):
+class NonlinearForce(AbstractForceTerm):
     """Tangents evaluated at every state (``model.tangents``)."""
 
     is_constant: ClassVar[bool] = False
@@ -196,7 +196,7 @@ class NonlinearForce(AbstractForce):
         return K, C, jnp.linalg.norm(K), jnp.linalg.norm(C)
 
 
-class LinearForce(AbstractForce):
+class LinearForce(AbstractForceTerm):
     """A force affine in (q, v): constant K and C, evaluated once.
 
     Attributes:
@@ -214,7 +214,7 @@ class LinearForce(AbstractForce):
         return self.K, self.C, self.K_norm, self.C_norm
 
 
-class BandedLinearForce(AbstractForce):
+class BandedLinearForce(AbstractForceTerm):
     """A linear force with banded K and C: differences of f are taken
     exactly on the band, -K (q - ref.q) - C (v - ref.v), O(b n).
 

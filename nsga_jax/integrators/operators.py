@@ -40,7 +40,7 @@ from .krylov import (
 from .linalg import band_matrix
 from .model_terms import (
     AbstractConstraintJacobian,
-    AbstractForce,
+    AbstractForceTerm,
     AbstractMass,
     BandedLinearForce,
     BandedMass,
@@ -76,7 +76,7 @@ class Operators(eqx.Module):
     """
 
     mass: AbstractMass
-    force: AbstractForce
+    force: AbstractForceTerm
     constraints: AbstractConstraintJacobian
     smooth: AbstractIterationMatrix
     position: AbstractIterationMatrix
@@ -170,7 +170,7 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
         M = model.mass(zeros)
         M_norm = jnp.linalg.norm(M)
         mass = ConstantMass(M, M_norm) if b is None else BandedMass(M, M_norm, band_matrix(M, b))
-    force: AbstractForce = NonlinearForce()
+    force: AbstractForceTerm = NonlinearForce()
     K_norm = C_norm = jnp.zeros((), real)
     if model.linear_force:
         K, C = model.tangents(zeros, zeros, t0)

@@ -1,7 +1,11 @@
-"""Models: the abstract :class:`Model` and the built-in systems."""
+"""Models: the abstract :class:`Model` interface the integrators step.
 
-from .bar import ElasticBar
+Every built-in scene is a :class:`~nsga_jax.system.System` of parts compiled
+into one :class:`~nsga_jax.system.SystemModel`; a model written by hand
+implements :class:`Model` directly (docs/own-model.md) and is checked with
+:func:`~nsga_jax.models.check.check_model`.
+"""
+
 from .base import Model
-from .point_mass import BouncingBall, RigidPendulum
 
-__all__ = ["Model", "BouncingBall", "RigidPendulum", "ElasticBar"]
+__all__ = ["Model"]

@@ -26,22 +26,12 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import lax
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
 from ..blocks import ElementMatrix, KroneckerMass, NodeRows
 from ..results import ConfigError
 from ..validation import Range, integer
-
-
-def side_rule(side) -> str | None:
-    """``side`` must be exactly +1 or -1 (which side of a wall is admissible):
-    any other value scales or removes the gap."""
-    values = np.asarray(side)
-    if not np.all(np.isin(values, (-1.0, 1.0))):
-        return f"side must be +1 or -1 (the admissible side of the wall), got {values.tolist()}"
-    return None
 
 
 def count_rule(name: str, value, lo: int = 1) -> str | None:

@@ -7,9 +7,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Matrix, Scalar, Vector
-from .._util import as_float
-from ..elements.rigid_body import (
+from nsga_jax._custom_types import Matrix, Scalar, Vector
+from nsga_jax._util import as_float
+from nsga_jax.elements.rigid_body import (
     angular_velocity,
     frame,
     natural_mass_matrix,
@@ -17,8 +17,8 @@ from ..elements.rigid_body import (
     rigidity_constraints,
     second_moments,
 )
-from ..validation import POSITIVE, UNIT_INTERVAL
-from .base import Model
+from nsga_jax.models import Model
+from nsga_jax.validation import POSITIVE, UNIT_INTERVAL
 
 
 class RigidBody(Model):

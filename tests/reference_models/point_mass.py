@@ -6,10 +6,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._custom_types import Matrix, Scalar, Vector
-from .._util import as_float
-from ..validation import POSITIVE, UNIT_INTERVAL
-from .base import Model, side_rule
+from nsga_jax._custom_types import Matrix, Scalar, Vector
+from nsga_jax._util import as_float
+from nsga_jax.models import Model
+from nsga_jax.validation import POSITIVE, UNIT_INTERVAL
+
+from .rules import side_rule
 
 
 class BouncingBall(Model):
