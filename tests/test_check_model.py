@@ -16,6 +16,7 @@ def test_built_in_models_keep_their_declarations(name):
     checked = nj.check_model(scene.model, scene.q0, scene.v0)
     assert {"sizes", "mass_product", "tangents"} <= set(checked)
     assert ("constant_mass" in checked) == scene.model.constant_mass
+    assert ("energy" in checked) == scene.model.has_energy
 
 
 def test_the_worked_example_model_keeps_its_declarations():
@@ -52,6 +53,16 @@ class AffineRod(RigidPendulum):
     linear_constraints = True
 
 
+class HalfKinetic(RigidPendulum):
+    def energy(self, q, v):
+        return 0.25 * self.m * (v @ v) + self.m * self.gravity * q[1]
+
+
+class PotentialUpsideDown(RigidPendulum):
+    def energy(self, q, v):
+        return 0.5 * self.m * (v @ v) - self.m * self.gravity * q[1]
+
+
 class Diagonal(ElasticBar):
     @property
     def bandwidth(self):
@@ -65,6 +76,8 @@ class Diagonal(ElasticBar):
     (AffineRod(**PENDULUM), r"linear_constraints: declared True, but the constraint Jacobian g_q changes"),
     (Diagonal(E=900.0, rho=1.0, area=1.0, length=10.0, gap0=1.0, e=0.0, n_elements=8),
      r"bandwidth: declared 0, but M has entries .* outside that band"),
+    (HalfKinetic(**PENDULUM), r"energy: dE/dv differs from M\(q\) v by 5.00e-01 .*not 1/2 v\^T M v"),
+    (PotentialUpsideDown(**PENDULUM), r"energy: dE/dq differs from -f\(q\) by 2.00e\+00 .*not the force's"),
 ])
 def test_a_wrong_flag_is_named(model, flag):
     with pytest.raises(nj.ConfigError, match=flag):

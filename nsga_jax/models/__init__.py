@@ -7,5 +7,6 @@ implements :class:`Model` directly (docs/own-model.md) and is checked with
 """
 
 from .base import Model
+from .capabilities import ElementBlocks, EnergyMonitor, FrictionalContacts
 
-__all__ = ["Model"]
+__all__ = ["Model", "ElementBlocks", "EnergyMonitor", "FrictionalContacts"]

@@ -23,15 +23,14 @@ from __future__ import annotations
 import abc
 from typing import ClassVar
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax import lax
 
 from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, Vector
-from ..blocks import ElementMatrix, KroneckerMass, NodeRows
 from ..results import ConfigError
 from ..validation import Range, integer
+from .capabilities import ElementBlocks, EnergyMonitor, FrictionalContacts
 
 
 def count_rule(name: str, value, lo: int = 1) -> str | None:
@@ -43,8 +42,8 @@ def count_rule(name: str, value, lo: int = 1) -> str | None:
     return None
 
 
-class Model(eqx.Module):
-    """Abstract base class of every model.
+class Model(FrictionalContacts, ElementBlocks, EnergyMonitor):
+    """Abstract base class of every model: what every model gives the integrator.
 
     Subclasses implement :meth:`mass`, :meth:`force`, and where they have
     constraints :meth:`bilateral`, :meth:`unilateral` and :attr:`restitution`.
@@ -54,6 +53,10 @@ class Model(eqx.Module):
     The tangents default to ``jax.jacfwd`` of the global functions; models
     assembled from elements override :meth:`tangents` with element-level
     tangents (see :mod:`nsga_jax.assembly`).
+
+    What a model may have beyond this (frictional contacts, element blocks
+    for the matrix-free path, an energy to monitor) is one capability each,
+    in :mod:`nsga_jax.models.capabilities`, whose defaults mean "not this".
     """
 
     ranges: ClassVar[dict[str, Range]] = {}
@@ -127,35 +130,6 @@ class Model(eqx.Module):
         return None
 
     @property
-    def matrix_free(self) -> bool:
-        """``True`` when the model gives its iteration matrices as element
-        blocks (:meth:`element_mass`, :meth:`element_stiffness`) and its constraint rows node by node
-        (:meth:`constraint_rows`), so that a large model is solved without
-        forming any n × n or (nc, n) array (:mod:`~nsga_jax.integrators.krylov`).
-        Such a model has a constant mass, a force that does not depend on v,
-        affine constraints without bilaterals, no friction, and rows of unit
-        norm no two of which share a coordinate."""
-        return False
-
-    def element_mass(self, q: Vector) -> ElementMatrix:
-        """M(q) as element blocks, never assembled (matrix-free models)."""
-        raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
-
-    def element_stiffness(self, q: Vector) -> ElementMatrix:
-        """K(q) = -df/dq as element blocks, never assembled (matrix-free models)."""
-        raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
-
-    def kronecker_mass(self) -> KroneckerMass | None:
-        """M as a Kronecker product, whose product and exact inverse cost O(n)
-        (a matrix-free model with a constant, structured mass): the inverse
-        preconditions its iteration matrices. ``None`` where M has no such form."""
-        return None
-
-    def constraint_rows(self, q: Vector) -> NodeRows:
-        """g_q(q) as node-local rows (matrix-free models), shape (nc, n)."""
-        raise NotImplementedError(f"{type(self).__name__} is not matrix-free")
-
-    @property
     @abc.abstractmethod
     def mbar(self) -> Scalar | float:
         """Characteristic mass m̄ [kg] used to scale the multipliers (paper §3.3.6)."""
@@ -192,53 +166,6 @@ class Model(eqx.Module):
     def restitution(self) -> ConstraintVector:
         """Newton restitution coefficients e, shape (nu,), each in [0, 1]."""
         return lax.full((self.n_unilateral,), 0.0)  # weakly typed: takes the run's precision
-
-    # ------------------------------------------------------------ friction
-    @property
-    def n_friction(self) -> int:
-        """Number of frictional contacts ``nf`` (unilateral constraints with a
-        Coulomb friction coefficient); 0: every contact is frictionless and no
-        friction row is ever formed."""
-        return 0
-
-    @property
-    def friction_dim(self) -> int:
-        """Tangent directions per frictional contact: 1 in a planar system (a
-        friction segment), 2 in space (a friction disk); 0 without friction."""
-        return 0
-
-    @property
-    def friction_normals(self) -> tuple[int, ...]:
-        """For each frictional contact, the row of its normal gap in the
-        constraint vector ``[g^B; g^U]`` (static, nf entries)."""
-        return ()
-
-    @property
-    def friction_coefficients(self) -> ConstraintVector:
-        """Coulomb coefficients μ >= 0 of the frictional contacts, shape (nf,)."""
-        return lax.full((self.n_friction,), 0.0)
-
-    def tangent_jacobian(self, q: Vector) -> ConstraintMatrix:
-        """g_T: the map from v to the tangential (slip) velocities of the
-        frictional contacts, shape (nf * friction_dim, n), contact by contact
-        (rows ``j * friction_dim + d``: tangent d of contact j) [m/s per unit of v]."""
-        return jnp.zeros((0, self.n_dof), q.dtype)
-
-    # ---------------------------------------------------------- monitors
-    def energy(self, q: Vector, v: Vector) -> Scalar:
-        """Total mechanical energy [J] (kinetic + potential + strain), where the
-        model defines one: runs then monitor it (largest rise, rise at impacts)."""
-        raise NotImplementedError
-
-    @property
-    def has_energy(self) -> bool:
-        """Whether the model defines :meth:`energy`."""
-        return type(self).energy is not Model.energy
-
-    def angular_speed(self, q: Vector, v: Vector) -> float | None:
-        """The largest angular speed [rad/s] of the model's bodies at (q, v), for
-        the coarse-step warning before a run; ``None`` where nothing turns."""
-        return None
 
     # ------------------------------------------------ derived (not overridden)
     def constraints(self, q: Vector) -> ConstraintVector:

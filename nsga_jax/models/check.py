@@ -12,6 +12,9 @@ names every declaration they contradict.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -46,8 +49,12 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
     ``velocity_dependent_force=False`` (no ∂f/∂v), ``linear_constraints``
     (the same g_q at every state) and a declared ``bandwidth`` (M and K zero
     outside the band), with friction its structure (normal rows,
-    coefficients, the tangent Jacobian's shape), and for a ``matrix_free``
-    model its element blocks and node rows against M, K and g_q.
+    coefficients, the tangent Jacobian's shape), for a ``matrix_free``
+    model its element blocks and node rows against M, K and g_q, and with an
+    energy its kinetic part (∂E/∂v = M v) and, where the force is
+    conservative, its potential (∂E/∂q = -f). What every model gives is
+    checked first; then each capability the model declares
+    (:data:`CAPABILITIES`, :mod:`nsga_jax.models.capabilities`).
 
     Args:
         q, v: the state to sample around, shape (n,) (default zeros).
@@ -79,11 +86,39 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
         fail("n_unilateral", f"restitution has shape {tuple(jnp.shape(model.restitution))}, expected ({nu},)")
     checked = ["sizes"]
 
+    sampled = _Samples(time, tuple(states), *_evaluate(model, states, time, fail))
+    checked += ["mass_product", "tangents"]
+    for capability in CAPABILITIES:
+        if capability.declared(model):
+            capability.check(model, sampled, fail)
+            checked.append(capability.name)
+    return checked
+
+
+class _Samples(NamedTuple):
+    """The model's matrices at the sampled states, each a list over states."""
+
+    time: jax.Array
+    states: tuple[tuple[jax.Array, jax.Array], ...]
+    masses: list
+    stiffness: list
+    damping: list
+    jacobians: list
+
+
+Fail = Callable[[str, str], None]
+
+
+def _evaluate(model: Model, states, time, fail: Fail) -> tuple[list, list, list, list]:
+    """What every model gives, at each state: M, K and C (from ``jax.jacfwd``
+    of the force) and g_q; ``mass_product`` and ``tangents`` checked against
+    them."""
+
     @jax.jit
     def evaluate(qs, vs):  # one compiled program for every sample: op by op, a system's jacfwd takes seconds
         return (model.mass(qs), model.mass_product(qs, vs), -jax.jacfwd(model.force, argnums=0)(qs, vs, time),
                 -jax.jacfwd(model.force, argnums=1)(qs, vs, time), model.tangents(qs, vs, time),
-                model.constraint_jacobian(qs) if nb + nu else None)
+                model.constraint_jacobian(qs) if model.n_constraints else None)
 
     masses, stiffness, damping, jacobians = [], [], [], []
     for qs, vs in states:
@@ -99,46 +134,68 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
         damping.append(C)
         if G is not None:
             jacobians.append(G)
-    checked += ["mass_product", "tangents"]
+    return masses, stiffness, damping, jacobians
 
-    if not model.velocity_dependent_force:
-        worst = max(float(jnp.abs(C).max(initial=0.0)) for C in damping)
-        if worst > 0.0:
-            fail("velocity_dependent_force", f"declared False, but the force depends on v (|df/dv| up to {worst:.3g})")
-        checked.append("velocity_dependent_force")
-    if model.constant_mass:
-        change = max(_differ(M, masses[0]) for M in masses[1:])
-        if change > RELATIVE:
-            fail("constant_mass", f"declared True, but M(q) changes with q (by {change:.2e}, relative)")
-        checked.append("constant_mass")
-    if model.linear_force:
-        change = max(max(_differ(K, stiffness[0]), _differ(C, damping[0]))
-                     for K, C in zip(stiffness[1:], damping[1:]))
-        if change > RELATIVE:
-            fail("linear_force", f"declared True, but the tangents K, C change with (q, v) (by {change:.2e}, "
-                                 "relative)")
-        checked.append("linear_force")
-    if model.linear_constraints and jacobians:
-        change = max(_differ(G, jacobians[0]) for G in jacobians[1:])
-        if change > RELATIVE:
-            fail("linear_constraints", f"declared True, but the constraint Jacobian g_q changes with q (by "
-                                       f"{change:.2e}, relative)")
-        checked.append("linear_constraints")
-    if model.n_friction:
-        _check_friction(model, [qs for qs, _ in states], fail)
-        checked.append("friction")
-    if model.matrix_free:
-        _check_matrix_free(model, states, masses, stiffness, jacobians, fail)
-        checked.append("matrix_free")
+
+def _force_without_v(model: Model, s: _Samples, fail: Fail) -> None:
+    worst = max(float(jnp.abs(C).max(initial=0.0)) for C in s.damping)
+    if worst > 0.0:
+        fail("velocity_dependent_force", f"declared False, but the force depends on v (|df/dv| up to {worst:.3g})")
+
+
+def _constant_mass(model: Model, s: _Samples, fail: Fail) -> None:
+    change = max(_differ(M, s.masses[0]) for M in s.masses[1:])
+    if change > RELATIVE:
+        fail("constant_mass", f"declared True, but M(q) changes with q (by {change:.2e}, relative)")
+
+
+def _linear_force(model: Model, s: _Samples, fail: Fail) -> None:
+    change = max(max(_differ(K, s.stiffness[0]), _differ(C, s.damping[0]))
+                 for K, C in zip(s.stiffness[1:], s.damping[1:]))
+    if change > RELATIVE:
+        fail("linear_force", f"declared True, but the tangents K, C change with (q, v) (by {change:.2e}, relative)")
+
+
+def _linear_constraints(model: Model, s: _Samples, fail: Fail) -> None:
+    change = max(_differ(G, s.jacobians[0]) for G in s.jacobians[1:])
+    if change > RELATIVE:
+        fail("linear_constraints", f"declared True, but the constraint Jacobian g_q changes with q (by "
+                                   f"{change:.2e}, relative)")
+
+
+def _bandwidth(model: Model, s: _Samples, fail: Fail) -> None:
     b = model.bandwidth
-    if b is not None:
-        outside = np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > b
-        for name, A in (("M", masses[0]), ("K", stiffness[0]), ("C", damping[0])):
-            worst = float(np.abs(np.asarray(A))[outside].max(initial=0.0))
-            if worst > 0.0:
-                fail("bandwidth", f"declared {b}, but {name} has entries up to {worst:.3g} outside that band")
-        checked.append("bandwidth")
-    return checked
+    n = model.n_dof
+    outside = np.abs(np.subtract.outer(np.arange(n), np.arange(n))) > b
+    for name, A in (("M", s.masses[0]), ("K", s.stiffness[0]), ("C", s.damping[0])):
+        worst = float(np.abs(np.asarray(A))[outside].max(initial=0.0))
+        if worst > 0.0:
+            fail("bandwidth", f"declared {b}, but {name} has entries up to {worst:.3g} outside that band")
+
+
+def _energy(model: Model, s: _Samples, fail: Fail) -> None:
+    """The energy's kinetic part is ½ vᵀ M(q) v: ∂E/∂v = M(q) v at every
+    state. Where the force is conservative (a constant mass, no dependence on
+    v or t), its potential is the rest: ∂E/∂q = -f(q)."""
+    grad = jax.jit(jax.grad(model.energy, argnums=(0, 1)))
+    conservative = model.constant_mass and not model.velocity_dependent_force
+    for (q, v), M in zip(s.states, s.masses):
+        dE_dq, dE_dv = grad(q, v)
+        if _differ(dE_dv, M @ v) > 1e-6:
+            fail("energy", f"dE/dv differs from M(q) v by {_differ(dE_dv, M @ v):.2e} (relative): the kinetic "
+                           "energy is not 1/2 v^T M v")
+        f = model.force(q, v, s.time)
+        if conservative and _differ(model.force(q, v, s.time + 1.0), f) <= RELATIVE and _differ(dE_dq, -f) > 1e-6:
+            fail("energy", f"dE/dq differs from -f(q) by {_differ(dE_dq, -f):.2e} (relative), where the force "
+                           "depends on q alone: the potential energy is not the force's")
+
+
+class Capability(NamedTuple):
+    """A capability a model may declare, and its check against the model's functions."""
+
+    name: str
+    declared: Callable[[Model], bool]
+    check: Callable[[Model, _Samples, Fail], None]
 
 
 def _check_matrix_free(model: Model, states, masses, stiffness, jacobians, fail) -> None:
@@ -202,4 +259,20 @@ def _check_friction(model: Model, qs, fail) -> None:
                                        f"{change:.2e}, relative)")
 
 
-__all__ = ["check_model"]
+
+CAPABILITIES: tuple[Capability, ...] = (
+    Capability("velocity_dependent_force", lambda m: not m.velocity_dependent_force, _force_without_v),
+    Capability("constant_mass", lambda m: m.constant_mass, _constant_mass),
+    Capability("linear_force", lambda m: m.linear_force, _linear_force),
+    Capability("linear_constraints", lambda m: m.linear_constraints and m.n_constraints > 0, _linear_constraints),
+    Capability("friction", lambda m: m.n_friction > 0, lambda m, s, fail: _check_friction(m, [q for q, _ in s.states],
+                                                                                         fail)),
+    Capability("matrix_free", lambda m: m.matrix_free, lambda m, s, fail: _check_matrix_free(
+        m, s.states, s.masses, s.stiffness, s.jacobians, fail)),
+    Capability("bandwidth", lambda m: m.bandwidth is not None, _bandwidth),
+    Capability("energy", lambda m: m.has_energy, _energy),
+)
+"""Each structure flag and capability :func:`check_model` checks where a
+model declares it, in this order (the first contradiction is raised)."""
+
+__all__ = ["CAPABILITIES", "Capability", "check_model"]
