@@ -191,7 +191,8 @@ def integrate(
             new_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(k < n_steps, a, b), new_carry, carry)
         if fn is None:
             return new_carry, out
-        watched = (out.newton.iterations, out.result, out.gap, out.bilateral, out.bilateral_rate)
+        watched = (out.newton.iterations, out.result, out.gap, out.bilateral, out.bilateral_rate, out.instants,
+                   out.fallback)
         return new_carry, (fn(new, out), watched)
 
     if checkpoint_steps:
@@ -205,11 +206,12 @@ def integrate(
     outs = jax.tree_util.tree_map(lambda x: x.reshape((n_chunks * c,) + x.shape[2:])[:n_steps], outs)
     first = _initial_record(model, scheme.subproblems, t0, q0, v0, dtype)
     if fn is None:
-        iterations, result, gap, bilateral, rate = (outs.newton.iterations, outs.result, outs.gap, outs.bilateral,
-                                                    outs.bilateral_rate)
+        iterations, result, gap, bilateral, rate, instants, fallback = (
+            outs.newton.iterations, outs.result, outs.gap, outs.bilateral, outs.bilateral_rate, outs.instants,
+            outs.fallback)
         saved = _prepend(first, outs)
     else:
-        saved, (iterations, result, gap, bilateral, rate) = outs
+        saved, (iterations, result, gap, bilateral, rate, instants, fallback) = outs
         saved = _prepend(fn(state0, first), saved)
     kept = np.asarray(saveat.kept_steps(n_steps))
     if saveat.every > 1:
@@ -223,7 +225,8 @@ def integrate(
     if throw:  # the first failed step's member names the failure; simulate names its step and time
         ts = from_code(code).error_if(ts, from_code(code) != RESULTS.successful)
     return Solution(ts=ts, q=q, v=v, records=saved, result=code,
-                    stats=traced_stats(scheme.subproblems, iterations, result, gap, bilateral, rate), h=h,
+                    stats=traced_stats(scheme.subproblems, iterations, result, gap, bilateral, rate, instants,
+                                       fallback), h=h,
                     n_steps=n_steps, n_steps_requested=n_steps)
 
 

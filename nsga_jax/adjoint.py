@@ -113,6 +113,10 @@ class ImpactTimeAdjoint(AbstractAdjoint):
             raise ConfigError(f"ImpactTimeAdjoint rebuilds an impact with Newton's law, not the impact_law = "
                               f"{law!r} of {type(scheme).__name__} (with friction they differ); use "
                               "DiscreteAdjoint(), the derivative of the energetic law as it runs")
+        if getattr(scheme, "impact_instants", False):
+            raise ConfigError(f"ImpactTimeAdjoint rebuilds an impact at the end of its step, not at the instant "
+                              f"{type(scheme).__name__}(impact_instants=True) locates inside it; use "
+                              "DiscreteAdjoint(), which differentiates the split step, the located instant included")
         new, out = scheme.step(model, ops, state, h)
         if model.n_unilateral == 0:
             return new, out, extra

@@ -42,7 +42,8 @@ def _run(args) -> int:
 
     overrides = dict(parse_override(s) for s in args.set)
     for key, value in (("h", args.h), ("t_end", args.t_end), ("rho_inf", args.rho_inf), ("scheme", args.scheme),
-                       ("dtype", args.dtype), ("record_every", args.record_every), ("impact_law", args.impact_law)):
+                       ("dtype", args.dtype), ("record_every", args.record_every), ("impact_law", args.impact_law),
+                       ("impacts", args.impacts)):
         if value is not None:
             overrides[key] = value
     if args.chunk is not None:
@@ -65,6 +66,7 @@ def _run(args) -> int:
     if not args.quiet:
         setting = f"theta = {s['theta']:g}" if s["scheme"] == "mj" else f"rho_inf = {s['rho_inf']:g}"
         law = f", impact_law = {s['impact_law']}" if s["impact_law"] != "newton" else ""
+        law += ", impacts at their instants" if s["impacts"] == "instants" else ""
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
               f"{setting}, {s['dtype']}{law}; output in {out}", file=sys.stderr)
     failure = None
@@ -100,6 +102,8 @@ def _run(args) -> int:
           f"{iterations}; "
           f"failed steps {st['failed_steps']}; max penetration {st['max_penetration']:.2e} m; "
           f"bilateral violation {st['max_bilateral_violation_position']:.2e} m"
+          + (f"; impacts at their instants {st['impacts_at_instants']} (steps that fell back "
+             f"{st['instant_fallbacks']})" if s["impacts"] == "instants" else "")
           + _energy_text(st["energy"]))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     for warning in st["warnings"]:

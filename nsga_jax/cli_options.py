@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import cast
 
 from .results import ConfigError
-from .validation import IMPACT_LAWS, SCHEME_NAMES
+from .validation import IMPACT_LAWS, IMPACT_TIMINGS, SCHEME_NAMES
 
 CACHE_ENV = "NSGA_JAX_CACHE"
 
@@ -70,6 +70,9 @@ def command_parser() -> argparse.ArgumentParser:
                      help="impact law with restitution (default newton): energetic caps Newton's restitution so "
                           "that a frictional impact cannot create energy (Kane's paradox; ds and dsn; "
                           "docs/friction.md)")
+    run.add_argument("--impacts", choices=IMPACT_TIMINGS,
+                     help="where an impact is applied (default end, the paper's): instants resolves each impact "
+                          "at its instant inside the step (ds and dsn; docs/scheme.md)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a config key (repeatable), e.g. --set e=0.5 or, for a system file, "
                           "--set bodies.ball.mass=2")

@@ -86,6 +86,8 @@ class RunTotals:
     solves_max: int = 0
     failed: list[int] = field(default_factory=list)
     first_result: int = 0
+    instants: int = 0
+    fallbacks: int = 0
     min_gap: float = math.inf
     max_bilateral: float = 0.0
     max_bilateral_rate: float = 0.0
@@ -129,6 +131,8 @@ class RunTotals:
         if bad.size and not self.failed:
             self.first_result = int(result[bad[0]])
         self.failed.extend((first_step + bad).tolist())
+        self.instants += int(np.sum(records.instants))
+        self.fallbacks += int(np.sum(records.fallback))
         gap = np.asarray(records.gap)
         if gap.size:
             self.min_gap = min(self.min_gap, float(gap.min()))

@@ -36,8 +36,9 @@ from .validation import (
 def check_scheme(scheme) -> None:
     """A scheme instance with tolerances in (0, inf), an integer iteration cap
     >= 1, integer sizes >= 0 for DS's fast paths (``krylov_min_dof`` may be
-    ``None``), DS's ``impact_law`` one of :data:`~nsga_jax.validation.IMPACT_LAWS`
-    and its own settings in their ranges (concrete values only:
+    ``None``), DS's ``impact_law`` one of :data:`~nsga_jax.validation.IMPACT_LAWS`,
+    its ``impact_instants`` a bool with ``max_impacts >= 1`` and
+    ``0 <= late < min_fraction < 0.5``, and its own settings in their ranges (concrete values only:
     traced settings are checked where they were made)."""
     require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
     integer("max_iter", scheme.max_iter, 1)
@@ -47,6 +48,13 @@ def check_scheme(scheme) -> None:
         integer("krylov_min_dof", scheme.krylov_min_dof, 0)
     if hasattr(scheme, "impact_law"):
         choice("impact_law", scheme.impact_law, IMPACT_LAWS)
+    if hasattr(scheme, "impact_instants"):
+        if not isinstance(scheme.impact_instants, (bool, np.bool_)):
+            raise ConfigError(f"impact_instants must be True or False, got {describe(scheme.impact_instants)}")
+        integer("max_impacts", scheme.max_impacts, 1)
+        real("min_fraction", scheme.min_fraction, 0.0, 0.5, lo_open=True, hi_open=True)
+        real("late", scheme.late, 0.0, scheme.min_fraction, hi_open=True,
+             note="a fraction of h, below min_fraction")
     settings = {"tol_r": (scheme.tol_r, 0.0, math.inf), "tol_f": (scheme.tol_f, 0.0, math.inf), **scheme.bounds()}
     for name, (value, lo, hi) in settings.items():
         if isinstance(value, jax.core.Tracer):

@@ -129,6 +129,8 @@ def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: HostResult,
         "us_per_step": 1e6 * float(wall_time) / max(int(n_steps), 1),
         "iterations": totals.iteration_stats(),
         "failed_steps": len(totals.failed),
+        "impacts_at_instants": totals.instants,
+        "instant_fallbacks": totals.fallbacks,
         "result": result.name,
         "max_penetration": float(max(0.0, -totals.min_gap)),
         "max_bilateral_violation_position": float(totals.max_bilateral),
@@ -140,10 +142,12 @@ def host_stats(totals: RunTotals, *, n_steps: int, h: float, result: HostResult,
 
 
 def traced_stats(subproblems: tuple[str, ...], iterations: jax.Array, result: jax.Array, gap: jax.Array,
-                 bilateral: jax.Array, bilateral_rate: jax.Array) -> dict[str, Any]:
+                 bilateral: jax.Array, bilateral_rate: jax.Array, instants: jax.Array,
+                 fallback: jax.Array) -> dict[str, Any]:
     """``Solution.stats`` of :func:`~nsga_jax.integrate`, in JAX, from every
     step's iterations (N, k) of the scheme's ``subproblems``, result codes
-    (N,), gaps (N, nu) [m] and bilateral violations (N, nb) [m] and [m/s]: the
+    (N,), gaps (N, nu) [m], bilateral violations (N, nb) [m] and [m/s] and
+    impacts resolved at their instants and fall-backs (N,) per step: the
     keys of :func:`host_stats` that need no host (no timings, energies or
     warnings)."""
     solves = jnp.sum(iterations, axis=1)
@@ -154,6 +158,8 @@ def traced_stats(subproblems: tuple[str, ...], iterations: jax.Array, result: ja
             for i, name in enumerate(subproblems)
         },
         "failed_steps": jnp.sum(result != int(Result.successful)),
+        "impacts_at_instants": jnp.sum(instants),
+        "instant_fallbacks": jnp.sum(fallback),
         "max_penetration": jnp.maximum(0.0, -jnp.min(gap, initial=jnp.inf)),
         "max_bilateral_violation_position": jnp.max(jnp.abs(bilateral), initial=0.0),
         "max_bilateral_violation_velocity": jnp.max(jnp.abs(bilateral_rate), initial=0.0),

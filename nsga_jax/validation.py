@@ -64,6 +64,12 @@ create energy with friction (:mod:`nsga_jax.integrators.impact_law`)."""
 ENERGETIC_SCHEMES = ("ds", "dsn")
 """The schemes that carry the energetic impact law; CS and MJ impose Newton's."""
 
+IMPACT_TIMINGS = ("end", "instants")
+"""Where DS and DSn apply an impact (the solver key ``impacts``,
+``--impacts``): at the end of the step that holds it, as in the paper, or at
+its instant inside the step (``DS(impact_instants=True)``,
+:mod:`nsga_jax.integrators.impact_instants`)."""
+
 class Range(NamedTuple):
     """A field's allowed interval; ``lo_open``/``hi_open`` exclude the bound.
     The declarative form of :func:`real`'s bounds, for model fields

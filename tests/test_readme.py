@@ -172,7 +172,15 @@ def _friction(ns):
     assert abs(float(sol.v[-1, 0])) < 1e-12  # stopped, and at rest
 
 
+def _impact_instants(ns):
+    sol = ns["sol"]
+    assert (sol.stats["impacts_at_instants"], sol.stats["instant_fallbacks"]) == (11, 0)
+    energy = 0.5 * sol.v[:, 0] ** 2 + 9.81 * sol.q[:, 0]
+    assert np.abs(energy / energy[0] - 1.0).max() < 1e-9  # e = 1: every bounce keeps the energy
+
+
 CHECKS = {
+    ("docs/impact-instants.md", "# Impacts at their instants"): _impact_instants,
     ("docs/systems.md", "## A first system"): _systems,
     ("docs/friction.md", "# Coulomb friction"): _friction,
     ("docs/newtons-cradle.md", "## In Python"): _newtons_cradle,

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._custom_types import Scalar, ScalarLike, Vector
@@ -37,6 +38,7 @@ from .base import (
 )
 from .coefficients import GenAlphaCoefficients
 from .friction import projection_start
+from .impact_instants import split_step
 from .impact_law import velocity_jump
 from .krylov import KRYLOV_MIN_DOF, KrylovOperator, kronecker_mass, linear_tolerance, mass_preconditioner
 from .model_terms import consistent_acceleration, force_at
@@ -127,6 +129,10 @@ class DS(AbstractGenAlpha):
     reuse_min_dof: int = eqx.field(static=True, default=100, kw_only=True)
     krylov_min_dof: int | None = eqx.field(static=True, default=KRYLOV_MIN_DOF, kw_only=True)
     impact_law: str = eqx.field(static=True, default="newton", kw_only=True)
+    impact_instants: bool = eqx.field(static=True, default=False, kw_only=True)
+    max_impacts: int = eqx.field(static=True, default=4, kw_only=True)
+    min_fraction: float = eqx.field(static=True, default=1e-6, kw_only=True)
+    late: float = eqx.field(static=True, default=1e-9, kw_only=True)
 
     name = "ds"
     subproblems = ("smooth", "position", "velocity")
@@ -191,7 +197,24 @@ class DS(AbstractGenAlpha):
         )
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
-        """Advance one step of size h [s]; returns the new state and the step's record."""
+        """Advance one step of size h [s]; returns the new state and the step's record.
+
+        With ``impact_instants`` a contact that closes inside the step is
+        resolved at its instant (:func:`~nsga_jax.integrators.impact_instants.split_step`);
+        otherwise (the default) this is the paper's step, :meth:`paper_step`."""
+        if self.impact_instants and model.n_unilateral:
+            return split_step(self, model, ops, state, h)
+        return self.paper_step(model, ops, state, h)
+
+    def paper_step(self, model: Model, ops: Operators, state: StepState, h: Scalar,
+                   restitute_at_end: jax.Array | None = None) -> tuple[StepState, StepOutput]:
+        """The paper's step of size h [s] (Algorithm 1): the new state and the step's record.
+
+        ``restitute_at_end`` (nc,) bool: rows whose Newton restitution takes
+        the pre-impact rate at the end of the smooth motion, g_q(q̃) ṽ, in
+        place of the step's start, g_q(q_n) v_n (a sub-step that ends at an
+        impact's instant, :mod:`~nsga_jax.integrators.impact_instants`);
+        ``None``: the start's everywhere, as in the paper."""
         tol = self.tolerances
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
@@ -218,6 +241,8 @@ class DS(AbstractGenAlpha):
         position: PositionAux = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
+        if restitute_at_end is not None:
+            G_prev_v_prev = jnp.where(restitute_at_end, ops.constraints.jacobian(model, qt) @ vt, G_prev_v_prev)
         velocity: VelocityAux
         jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=position.active, f_smooth=f_smooth,
                               G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces)

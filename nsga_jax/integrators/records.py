@@ -154,6 +154,10 @@ class StepOutput(eqx.Module):
     friction (nf · d,): the tangential impulses P_T [N s] of the frictional
     contacts, contact by contact (empty without friction);
     newton: the :class:`NewtonRecord` of the scheme's sub-problems;
+    instants: impacts resolved at their instants in the step (int32; 0 but
+    with ``DS(impact_instants=True)``, :mod:`~nsga_jax.integrators.impact_instants`);
+    fallback: the step reached its cap of instants and took what was left
+    as one paper step (bool);
     result: the code of the step's :data:`~nsga_jax.results.RESULTS` member
     (int32; ``Result(code)`` on the host, :func:`~nsga_jax.results.from_code` in JAX).
     """
@@ -171,6 +175,8 @@ class StepOutput(eqx.Module):
     active_velocity: PerConstraintFlag
     friction: jax.Array
     newton: NewtonRecord
+    instants: PerStep
+    fallback: Bool[Array, "..."]
     result: PerStep
 
 
@@ -191,7 +197,7 @@ def make_output(model: Model, t, q, v, lam, newton: NewtonRecord, result, nu=Non
         active_position=no if active_position is None else active_position,
         active_velocity=no if active_velocity is None else active_velocity,
         friction=jnp.zeros((model.n_friction * model.friction_dim,), q.dtype) if friction is None else friction,
-        newton=newton, result=code_of(result),
+        newton=newton, instants=jnp.zeros((), jnp.int32), fallback=jnp.zeros((), bool), result=code_of(result),
     )
 
 
@@ -217,7 +223,7 @@ def output_template(model: Model, dtype, subproblems: Sequence[str]) -> StepOutp
     return StepOutput(t=f(), q=f(n), v=f(n), lam=f(nb), nu=f(nc), impulse=f(nc), gap=f(nu), bilateral=f(nb),
                       bilateral_rate=f(nb), active_position=flags, active_velocity=flags,
                       friction=f(model.n_friction * model.friction_dim), newton=newton,
-                      result=f(dtype=jnp.int32))
+                      instants=f(dtype=jnp.int32), fallback=f(dtype=jnp.bool_), result=f(dtype=jnp.int32))
 
 
 # ------------------------------------------------------------ packing

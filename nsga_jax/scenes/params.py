@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..results import ConfigError
-from ..validation import ENERGETIC_SCHEMES, IMPACT_LAWS, SCHEME_NAMES, Range, time_grid
+from ..validation import ENERGETIC_SCHEMES, IMPACT_LAWS, IMPACT_TIMINGS, SCHEME_NAMES, Range, time_grid
 
 
 @dataclass(frozen=True)
@@ -110,6 +110,9 @@ SOLVER_PARAMS: dict[str, Param] = {
     "impact_law": Param("newton", "impact law with restitution: Newton's (newton) or, with friction, one that "
                         "cannot create energy (energetic; ds and dsn only; see docs/friction.md)", kind="choice",
                         choices=IMPACT_LAWS),
+    "impacts": Param("end", "where an impact is applied: at the end of the step that holds it, as in the paper "
+                     "(end), or at its instant inside the step (instants; ds and dsn only; see docs/scheme.md)",
+                     kind="choice", choices=IMPACT_TIMINGS),
     "record_every": Param(1, "keep every k-th step (and the last) in memory, on disk and in trajectory.npz; "
                           "the statistics cover every step", kind="int", lo=1,
                           hi=1_000_000_000),
@@ -125,6 +128,10 @@ def check_solver(solver: dict[str, Any]) -> None:
     if law != "newton" and solver["scheme"] not in ENERGETIC_SCHEMES:
         raise ConfigError(f"impact_law = {law!r} is carried by the schemes {', '.join(ENERGETIC_SCHEMES)}; "
                           f"scheme = {solver['scheme']!r} imposes Newton's law (impact_law = 'newton')")
+    if solver.get("impacts", "end") != "end" and solver["scheme"] not in ENERGETIC_SCHEMES:
+        raise ConfigError(f"impacts = {solver['impacts']!r} is an option of the schemes "
+                          f"{', '.join(ENERGETIC_SCHEMES)}; scheme = {solver['scheme']!r} applies impacts at the end "
+                          "of the step (impacts = 'end')")
 
 
 def check_all(section: str, specs: dict[str, Param], values: dict[str, Any]) -> dict[str, Any]:

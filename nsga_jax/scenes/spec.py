@@ -71,7 +71,8 @@ class Scene:
 
 
 def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
-    """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter, impact_law)."""
+    """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter, impact_law,
+    impacts)."""
     from ..integrators import scheme_class
 
     common = dict(tol_r=solver["tol_r"], tol_f=solver["tol_f"], max_iter=solver["max_iter"])
@@ -81,6 +82,8 @@ def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
         return cls(theta=solver["theta"], **common)
     if solver.get("impact_law", "newton") != "newton":  # DS, DSn (check_solver refuses the others)
         common["impact_law"] = solver["impact_law"]
+    if solver.get("impacts", "end") == "instants":  # DS, DSn likewise
+        common["impact_instants"] = True
     return cls(rho_inf=solver["rho_inf"], **common)
 
 

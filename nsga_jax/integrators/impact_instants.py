@@ -1,0 +1,172 @@
+"""Impacts at their instants: a DS step split where a contact closes inside it.
+
+The paper's DS step (like every time-stepping scheme of the field) applies the
+impact law at the end of the step that holds the impact, with the velocity of
+the step's start plus a whole step of smooth forces: each impact is O(h)
+wrong (an elastic ball loses g h of speed at every bounce). With
+``DS(impact_instants=True)`` a step looks ahead before it is taken:
+
+1. **Locate.** Along the smooth motion's Taylor path from the step's start,
+   p(s) = q + s v + s²/2 v̇̃ (the smooth acceleration, exact for a constant
+   force), each unilateral contact that is open at the start (gap above a
+   floor, :func:`open_floor`) and closed at the end of the span left is a
+   closing contact; its instant s* solves g(p(s)) = 0 (Newton on s, from
+   the secant estimate, clipped to the span). The earliest instant wins.
+2. **Split.** The step is taken as sub-steps of the paper's DS step: up to
+   the instant (ended a small time ``late`` after it, so that the contact is
+   closed by a round-off gap: the position correction then projects it and
+   the velocity jump applies the impact law with the velocity at the
+   instant), then again from the post-impact state over what is left of the
+   step, looking ahead once more. At most ``max_impacts`` instants are
+   resolved in a step; what is left after them is one paper step (the
+   fall-back: an accumulation, as a ball coming to rest).
+3. **Across the split** each sub-step starts from the previous one's
+   (q, v, v̇̃, a), with coefficients for its own size; after a sub-step that
+   ends at an impact, v̇̃ and a restart from the post-impact state as at t0
+   (:func:`restart_after_impact`).
+
+Contacts closed at the step's start (persistent contact, a body at rest)
+are never located: the step is the paper's. Neither is an instant within
+``min_fraction · h`` of either end of the span (an impact the paper's step
+already resolves to that fraction of a step).
+
+A step's record sums its sub-steps' impulses, multipliers, friction impulses
+and Newton iterations, keeps the worst residual of each sub-problem and the
+first failure, and reports the state at the step's end, the number of impacts resolved
+(``StepOutput.instants``) and whether the step fell back (``fallback``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from .._custom_types import Scalar, Vector
+from ..models.base import Model
+from ..results import RESULTS, code_of
+from .base import StepState
+from .operators import Operators
+from .records import NewtonRecord, StepOutput
+
+if TYPE_CHECKING:
+    from .ds import DS
+
+LOCATE_ITERATIONS = 6
+"""Newton iterations on s for an instant (a quadratic gap needs one; a
+smooth gap converges quadratically from the secant estimate)."""
+
+
+def open_floor(gaps: jax.Array) -> jax.Array:
+    """The gap [m] above which a contact counts as open at a step's start:
+    1e3 machine epsilons of the largest gap (a contact the position
+    correction closed sits at a round-off gap below it)."""
+    eps = jnp.finfo(gaps.dtype).eps
+    return 1e3 * eps * jnp.maximum(jnp.max(jnp.abs(gaps), initial=0.0), 1.0)
+
+
+def taylor_path(state: StepState, s: Scalar) -> Vector:
+    """p(s) = q + s v + s²/2 v̇̃: the smooth motion from the state, to O(s³) [m]."""
+    return state.q + s * state.v + 0.5 * s**2 * state.vd
+
+
+def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: float,
+                  h: Scalar) -> tuple[jax.Array, Scalar]:
+    """Whether a contact open at ``state`` closes inside (0, span] along the
+    Taylor path, and the earliest such instant s* [s] (relative to the state's time).
+
+    Instants within ``min_fraction · h`` of 0 or of ``span`` are not
+    reported (the paper's step is kept for them)."""
+    g0 = model.unilateral(state.q)
+    floor = open_floor(g0)
+    g1 = model.unilateral(taylor_path(state, span))
+    closing = (g0 > floor) & (g1 < 0.0)
+    s = span * g0 / jnp.where(closing, g0 - g1, 1.0)  # the secant estimate
+
+    def gap_and_rate(s):
+        return jax.jvp(lambda x: model.unilateral(taylor_path(state, x)), (s,), (jnp.ones_like(s),))
+
+    def newton(_, s):
+        g, dg = jax.vmap(lambda j, sj: jax.tree.map(lambda a: a[j], gap_and_rate(sj)))(jnp.arange(g0.shape[0]), s)
+        return jnp.clip(s - g / jnp.where(dg < 0.0, dg, -1.0), 0.0, span)
+
+    s = lax.fori_loop(0, LOCATE_ITERATIONS, newton, jnp.where(closing, s, span))
+    margin = min_fraction * h
+    inside = closing & (s > margin) & (s < span - margin)
+    instant = jnp.min(jnp.where(inside, s, span))
+    return jnp.any(inside), instant
+
+
+def restart_after_impact(scheme: DS, model: Model, state: StepState, impact: jax.Array) -> StepState:
+    """After a sub-step that ends at an impact, the generalized-α variables
+    restart from the post-impact state as at t0 (Algorithm 1, lines 2-3):
+    v̇̃ consistent with (q⁺, v⁺) and a = v̇̃. The jump changes v, hence the
+    velocity-dependent forces and the bilateral constraints' acceleration
+    terms: the pre-impact a (a shifted average of past accelerations) would
+    carry an O(1) error into the next steps' velocities, a first-order error
+    in the run (docs/scheme.md, *Impacts at their instants*)."""
+    fresh = scheme.init(model, state.t, state.q, state.v)
+    return eqx.tree_at(lambda s: (s.vd, s.a), state, (jnp.where(impact, fresh.vd, state.vd),
+                                                      jnp.where(impact, fresh.a, state.a)))
+
+
+def _merge(acc: StepOutput, out: StepOutput) -> StepOutput:
+    """The record of a step made of sub-steps: the last sub-step's state,
+    sums of impulses and iterations, the worst residual, the first failure."""
+    worse = out.newton.residual * acc.newton.tolerance > acc.newton.residual * out.newton.tolerance
+    newton = NewtonRecord(names=out.newton.names, iterations=acc.newton.iterations + out.newton.iterations,
+                          residual=jnp.where(worse, out.newton.residual, acc.newton.residual),
+                          tolerance=jnp.where(worse, out.newton.tolerance, acc.newton.tolerance))
+    ok = code_of(RESULTS.successful)
+    return eqx.tree_at(
+        lambda o: (o.nu, o.impulse, o.friction, o.active_position, o.active_velocity, o.newton, o.result),
+        out, (acc.nu + out.nu, acc.impulse + out.impulse, acc.friction + out.friction,
+              acc.active_position | out.active_position, acc.active_velocity | out.active_velocity, newton,
+              jnp.where(acc.result != ok, acc.result, out.result)))
+
+
+def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
+               h: Scalar) -> tuple[StepState, StepOutput]:
+    """One step of size h [s] with its impacts at their instants (module docstring).
+
+    A step where no open contact closes is the paper's step with the run's
+    operators ``ops``; a split step prepares the operators of each sub-step's size."""
+    found, _ = first_instant(model, state, h, scheme.min_fraction, h)
+
+    def paper(state):
+        return scheme.paper_step(model, ops, state, h)
+
+    def split(state):
+        t_end = state.t + h
+
+        def take(k, st, left, acc, impacts):
+            found, s = first_instant(model, st, left, scheme.min_fraction, h)
+            located = found & (k < scheme.max_impacts)
+            size = jnp.where(located, s + scheme.late * h, left)  # s < left - min_fraction h < left - late h
+            g0 = model.unilateral(st.q)
+            closing = jnp.concatenate([jnp.zeros((model.n_bilateral,), bool), located & (g0 > open_floor(g0))])
+            new, out = scheme.paper_step(model, scheme.prepare(model, size, st.t), st, size, closing)
+            new = restart_after_impact(scheme, model, new, located)
+            merged = out if acc is None else _merge(acc, out)
+            return new, left - size, ~located, merged, impacts + located.astype(jnp.int32)
+
+        # the first sub-step: a closing contact was found over h, so it ends at its instant
+        carry = take(0, state, h, None, jnp.zeros((), jnp.int32))
+
+        def next_substep(k, carry):
+            st, left, done, acc, impacts = carry
+            return lax.cond(done, lambda: carry, lambda: take(k, st, left, acc, impacts))
+
+        new, _, _, out, impacts = lax.fori_loop(1, scheme.max_impacts + 1, next_substep, carry)
+        new = eqx.tree_at(lambda s: s.t, new, t_end)
+        out = eqx.tree_at(lambda o: (o.t, o.instants, o.fallback), out,
+                          (t_end, impacts, impacts >= scheme.max_impacts))
+        return new, out
+
+    return lax.cond(found, split, paper, state)
+
+
+__all__ = ["restart_after_impact", "first_instant", "open_floor", "split_step", "taylor_path"]
