@@ -173,6 +173,7 @@ import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 import nsga_jax as nj
+from reference_models import BouncingBall
 assert len(jax.devices()) == 2
 ball = BouncingBall(m=1.0, gravity=9.81, e=0.8)
 h0 = jnp.asarray([0.3, 0.5, 0.7, 0.9])
@@ -204,7 +205,11 @@ def test_integrate_with_members_sharded_over_two_devices():
     import sys
     import textwrap
 
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    from pathlib import Path
+
+    tests = str(Path(__file__).parent)  # where reference_models lives
+    path = os.pathsep.join(p for p in (tests, os.environ.get("PYTHONPATH")) if p)
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "PYTHONPATH": path}
     proc = subprocess.run([sys.executable, "-c", textwrap.dedent(SHARDED)], env=env, capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
