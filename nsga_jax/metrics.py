@@ -1,6 +1,9 @@
-"""Accuracy measures: the paper's eq. 52 error and observed orders of convergence."""
+"""Accuracy measures: the paper's eq. 52 error, observed orders of
+convergence, and the effective restitution of a run's first impact."""
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -34,3 +37,52 @@ def observed_order(step_sizes, errors) -> float:
     h = np.log(np.asarray(step_sizes, dtype=float))
     e = np.log(np.asarray(errors, dtype=float))
     return float(np.polyfit(h, e, 1)[0])
+
+
+class Rebound(NamedTuple):
+    """A contact's first impact in a run, as :func:`first_rebound` measures it."""
+
+    contact: int
+    """Which unilateral contact (index among the model's nu)."""
+    instant: float
+    """The impact's instant [s]: the root of the gap's cubic through the four steps before it."""
+    rate_before: float
+    """The contact's normal rate g_q v [m/s] at the instant, from the four steps before it."""
+    rate_after: float
+    """The same from the four steps after it."""
+
+    @property
+    def restitution(self) -> float:
+        """The effective Newton restitution, -rate_after / rate_before."""
+        return -self.rate_after / self.rate_before
+
+
+def first_rebound(model, sol) -> Rebound:
+    """The first step over which an open contact's normal rate turns from
+    closing (below -0.5 m/s, within 1.5 steps of touching) to opening, and
+    its rates just before and just after the impact, each extrapolated to
+    the impact's instant by cubics through the four saved steps on its side
+    (error O(h⁴) for a smooth free flight on either side).
+
+    ``sol``: a run saved at every step (``sol.ts`` equally spaced), with at
+    least four steps on either side of the impact."""
+    import jax
+
+    q, v, t = np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.ts)
+    h = float(t[1] - t[0])
+    gaps = np.asarray(jax.vmap(model.unilateral)(q))
+    rates = np.asarray(jax.vmap(lambda q, v: model.constraint_jacobian(q)[model.n_bilateral:] @ v)(q, v))
+    hits = (rates[1:] > 0.0) & (rates[:-1] < -0.5) & (gaps[:-1] < -1.5 * h * rates[:-1])
+    if not hits.any():
+        raise ValueError("no impact in the run: no contact's normal rate turns from closing to opening")
+    k = int(np.argmax(hits.any(axis=1))) + 1
+    i = int(np.argmax(hits[k - 1]))
+    before, after = slice(k - 4, k), slice(k + 1, k + 5)
+    if k < 4 or k + 5 > len(t):
+        raise ValueError(f"the first impact (step {k}) needs four saved steps on either side")
+    roots = np.roots(np.polyfit(t[before], gaps[before, i], 3))
+    roots = roots[np.isreal(roots)].real
+    instant = float(roots[np.argmin(np.abs(roots - t[k - 1]))])
+    rate_before, rate_after = (float(np.polyval(np.polyfit(t[side], rates[side, i], 3), instant))
+                               for side in (before, after))
+    return Rebound(i, instant, rate_before, rate_after)

@@ -204,7 +204,6 @@ def test_integrate_with_members_sharded_over_two_devices():
     import subprocess
     import sys
     import textwrap
-
     from pathlib import Path
 
     tests = str(Path(__file__).parent)  # where reference_models lives

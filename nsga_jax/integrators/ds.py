@@ -207,14 +207,16 @@ class DS(AbstractGenAlpha):
         return self.paper_step(model, ops, state, h)
 
     def paper_step(self, model: Model, ops: Operators, state: StepState, h: Scalar,
-                   restitute_at_end: jax.Array | None = None) -> tuple[StepState, StepOutput]:
+                   closing_at_end: jax.Array | None = None) -> tuple[StepState, StepOutput]:
         """The paper's step of size h [s] (Algorithm 1): the new state and the step's record.
 
-        ``restitute_at_end`` (nc,) bool: rows whose Newton restitution takes
-        the pre-impact rate at the end of the smooth motion, g_q(q̃) ṽ, in
-        place of the step's start, g_q(q_n) v_n (a sub-step that ends at an
-        impact's instant, :mod:`~nsga_jax.integrators.impact_instants`);
-        ``None``: the start's everywhere, as in the paper."""
+        ``closing_at_end`` (nc,) bool: the contacts a sub-step closes at its
+        end, a located impact instant (:mod:`~nsga_jax.integrators.impact_instants`):
+        the position correction holds them closed (g = 0, whatever the sign
+        of the gap the O(s³) located instant leaves at q̃) and their Newton
+        restitution takes the pre-impact rate at the end of the smooth
+        motion, g_q(q̃) ṽ, in place of the step's start, g_q(q_n) v_n;
+        ``None``: neither, as in the paper."""
         tol = self.tolerances
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
@@ -235,14 +237,15 @@ class DS(AbstractGenAlpha):
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
         sol_p = solve(position_problem, PositionInputs(**step.shared(), smooth=smooth, f_smooth=f_smooth,
-                                                       with_forces=self.nonsmooth_forces, q_prev=state.q),
+                                                       with_forces=self.nonsmooth_forces, q_prev=state.q,
+                                                       held_closed=closing_at_end),
                       projection_start(model, qt), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
-        if restitute_at_end is not None:
-            G_prev_v_prev = jnp.where(restitute_at_end, ops.constraints.jacobian(model, qt) @ vt, G_prev_v_prev)
+        if closing_at_end is not None:
+            G_prev_v_prev = jnp.where(closing_at_end, ops.constraints.jacobian(model, qt) @ vt, G_prev_v_prev)
         velocity: VelocityAux
         jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=position.active, f_smooth=f_smooth,
                               G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces)
