@@ -3,9 +3,13 @@ convergence, and the effective restitution of a run's first impact."""
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .models.base import Model
+    from .solution import Solution
 
 
 def relative_l1_error(numerical, reference) -> float:
@@ -57,7 +61,7 @@ class Rebound(NamedTuple):
         return -self.rate_after / self.rate_before
 
 
-def first_rebound(model, sol) -> Rebound:
+def first_rebound(model: Model, sol: Solution) -> Rebound:
     """The first step over which an open contact's normal rate turns from
     closing (below -0.5 m/s, within 1.5 steps of touching) to opening, and
     its rates just before and just after the impact, each extrapolated to
@@ -67,8 +71,9 @@ def first_rebound(model, sol) -> Rebound:
     ``sol``: a run saved at every step (``sol.ts`` equally spaced), with at
     least four steps on either side of the impact."""
     import jax
+    import jax.numpy as jnp
 
-    q, v, t = np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.ts)
+    q, v, t = jnp.asarray(sol.q), jnp.asarray(sol.v), np.asarray(sol.ts)
     h = float(t[1] - t[0])
     gaps = np.asarray(jax.vmap(model.unilateral)(q))
     rates = np.asarray(jax.vmap(lambda q, v: model.constraint_jacobian(q)[model.n_bilateral:] @ v)(q, v))
@@ -82,7 +87,10 @@ def first_rebound(model, sol) -> Rebound:
         raise ValueError(f"the first impact (step {k}) needs four saved steps on either side")
     roots = np.roots(np.polyfit(t[before], gaps[before, i], 3))
     roots = roots[np.isreal(roots)].real
-    instant = float(roots[np.argmin(np.abs(roots - t[k - 1]))])
+    instant = float(roots[np.argmin(np.abs(roots - t[k - 1]))]) if roots.size else np.nan
+    if not t[k - 1] <= instant <= t[k]:
+        raise ValueError(f"the first impact's instant ({instant:.6g} s, from the gap's cubic) is outside its step "
+                         f"[{t[k - 1]:.6g}, {t[k]:.6g}] s: the steps before it do not resolve the free flight")
     rate_before, rate_after = (float(np.polyval(np.polyfit(t[side], rates[side, i], 3), instant))
                                for side in (before, after))
     return Rebound(i, instant, rate_before, rate_after)

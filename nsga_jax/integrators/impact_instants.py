@@ -17,8 +17,8 @@ wrong (an elastic ball loses g h of speed at every bounce). With
    correction holds the closing contacts closed, g = 0 (whatever the sign
    of the O(s³) gap the Taylor path's instant leaves: a rotating body's
    vertex can stop 1e-9 m short) and the velocity jump applies the impact
-   law with the velocity at the instant, then again from the post-impact state over what is left of the
-   step, looking ahead once more. At most ``max_impacts`` instants are
+   law with the velocity at the instant; then again from the post-impact
+   state over what is left of the step, looking ahead once more. At most ``max_impacts`` instants are
    resolved in a step; what is left after them is one paper step (the
    fall-back: an accumulation, as a ball coming to rest).
 3. **Across the split** each sub-step starts from the previous one's
