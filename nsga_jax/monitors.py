@@ -136,7 +136,9 @@ class RunTotals:
         gap = np.asarray(records.gap)
         if gap.size:
             self.min_gap = min(self.min_gap, float(gap.min()))
-            self._add_chains(gap, np.asarray(records.impulse), first_step)
+            # a step that located its impacts and did not fall back took them in sequence
+            in_sequence = (np.asarray(records.instants) > 0) & ~np.asarray(records.fallback)
+            self._add_chains(gap, np.asarray(records.impulse), first_step, in_sequence)
         self.max_bilateral = max(self.max_bilateral, _absmax(records.bilateral))
         self.max_bilateral_rate = max(self.max_bilateral_rate, _absmax(records.bilateral_rate))
         if energies is not None and math.isfinite(self.energy_last):
@@ -172,7 +174,8 @@ class RunTotals:
         gap0 = np.asarray(gap0, float)
         self.recent_gaps = np.stack([gap0 - h * np.asarray(gap_rate0, float), gap0])
 
-    def _add_chains(self, gap: np.ndarray, impulse: np.ndarray, first_step: int) -> None:
+    def _add_chains(self, gap: np.ndarray, impulse: np.ndarray, first_step: int,
+                    in_sequence: np.ndarray | None = None) -> None:
         """Count the steps where an impact closed another contact within the
         step: a contact that takes an impulse together with another, open at
         the step's start (gap above round-off) and closing by its own motion
@@ -181,13 +184,18 @@ class RunTotals:
         close by their own motion (a gap that jumps, as a corner's that enters
         a bounded face, is closed by no impact). The step then resolves in one
         simultaneous impact what happens in sequence (a Newton's cradle whose
-        gaps are shorter than a step's travel)."""
+        gaps are shorter than a step's travel). Steps marked ``in_sequence``
+        (split at their located impact instants, without a fall-back) are
+        not counted."""
         nu = gap.shape[1]
         history = gap if self.recent_gaps is None else np.concatenate([self.recent_gaps, gap])
         lead = len(history) - len(gap)
         hit = impulse[:, impulse.shape[1] - nu:] != 0.0
         floor = 1e3 * np.finfo(gap.dtype).eps * max(1.0, float(np.abs(history).max()))
-        for i in np.nonzero(hit.sum(axis=1) >= 2)[0]:
+        several = hit.sum(axis=1) >= 2
+        if in_sequence is not None:
+            several &= ~in_sequence
+        for i in np.nonzero(several)[0]:
             k = lead + i  # history row after this step
             if k < 2:
                 continue

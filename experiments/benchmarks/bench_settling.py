@@ -7,7 +7,10 @@ the exact solution's (:func:`~nsga_jax.exact.rocking_impact_times`) while
 they are resolvable (the interval since the last one at least
 ``RESOLVABLE`` steps), printed as a Markdown table.
 
-    python experiments/benchmarks/bench_settling.py [--t-end 60] [--h 1e-3 2e-3 4e-3] [--mu 1.0]
+    python experiments/benchmarks/bench_settling.py [--t-end 60] [--h 1e-3 2e-3 4e-3] [--mu 1.0] [--impacts end]
+
+``--impacts instants`` runs DS with its impacts located inside their steps
+(docs/impact-instants.md) instead of the paper's step.
 """
 
 from __future__ import annotations
@@ -35,8 +38,8 @@ def landings(theta: np.ndarray) -> np.ndarray:
     return nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]
 
 
-def measure(h: float, t_end: float, mu: float) -> str:
-    scene = load_scene("rocking_block", {"h": h, "t_end": t_end, "mu": mu})
+def measure(h: float, t_end: float, mu: float, impacts: str = "end") -> str:
+    scene = load_scene("rocking_block", {"h": h, "t_end": t_end, "mu": mu, "impacts": impacts})
     sol = scene.run(throw=False)
     q, ts = np.asarray(sol.q), np.asarray(sol.ts)
     last = ts >= ts[-1] - 10.0
@@ -57,12 +60,13 @@ def main() -> None:
     parser.add_argument("--t-end", type=float, default=60.0)
     parser.add_argument("--h", type=float, nargs="+", default=[1e-3, 2e-3, 4e-3])
     parser.add_argument("--mu", type=float, default=1.0)
+    parser.add_argument("--impacts", choices=("end", "instants"), default="end")
     args = parser.parse_args()
     print("| h [s] | mu | t_end [s] | failed steps | position its. mean / max | final tilt [rad] | "
           "drift, last 10 s [m] | energy above start (rel.) | impacts | exact, resolvable |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for h in args.h:
-        print(measure(h, args.t_end, args.mu), flush=True)
+        print(measure(h, args.t_end, args.mu, args.impacts), flush=True)
 
 
 if __name__ == "__main__":

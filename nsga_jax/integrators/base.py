@@ -32,7 +32,11 @@ class StepState(eqx.Module):
     v̇̃; a (n,): generalized-α pseudo-acceleration (both zero for Moreau–Jean);
     factorisations: the iteration-matrix factorisations a scheme keeps for its
     next step (one per sub-problem, ``None`` where it keeps none; see
-    :attr:`~nsga_jax.integrators.ds.DS.reuse_min_dof`), or ``None``.
+    :attr:`~nsga_jax.integrators.ds.DS.reuse_min_dof`), or ``None``;
+    closed (nu,) bool: the unilateral contacts the step closed (active in
+    its position correction), which a step that locates impact instants
+    does not locate again (:mod:`~nsga_jax.integrators.impact_instants`), or
+    ``None`` where the scheme does not locate them.
     """
 
     t: Scalar
@@ -41,6 +45,7 @@ class StepState(eqx.Module):
     vd: Vector
     a: Vector
     factorisations: tuple | None = None
+    closed: jax.Array | None = None
 
 
 # ------------------------------------------------------------------- schemes

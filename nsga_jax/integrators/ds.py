@@ -38,7 +38,7 @@ from .base import (
 )
 from .coefficients import GenAlphaCoefficients
 from .friction import projection_start
-from .impact_instants import split_step
+from .impact_instants import open_floor, split_step
 from .impact_law import velocity_jump
 from .krylov import KRYLOV_MIN_DOF, KrylovOperator, kronecker_mass, linear_tolerance, mass_preconditioner
 from .model_terms import consistent_acceleration, force_at
@@ -176,6 +176,9 @@ class DS(AbstractGenAlpha):
             state = StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
         if state is None:
             state = super().init(model, t0, q0, v0)
+        if self.impact_instants and model.n_unilateral:  # closed at t0: at a round-off gap
+            g0 = model.unilateral(state.q)
+            state = dataclasses.replace(state, closed=g0 <= open_floor(g0))
         reused = self.reused(model)
         if not any(reused):
             return state
@@ -212,11 +215,11 @@ class DS(AbstractGenAlpha):
 
         ``closing_at_end`` (nc,) bool: the contacts a sub-step closes at its
         end, a located impact instant (:mod:`~nsga_jax.integrators.impact_instants`):
-        the position correction holds them closed (g = 0, whatever the sign
-        of the gap the O(s³) located instant leaves at q̃) and their Newton
-        restitution takes the pre-impact rate at the end of the smooth
-        motion, g_q(q̃) ṽ, in place of the step's start, g_q(q_n) v_n;
-        ``None``: neither, as in the paper."""
+        the velocity jump takes them as candidates (whatever the sign of the
+        gap the O(s³) located instant leaves after the position correction)
+        and their Newton restitution takes the pre-impact rate at the end of
+        the smooth motion, g_q(q̃) ṽ, in place of the step's start,
+        g_q(q_n) v_n; ``None``: neither, as in the paper."""
         tol = self.tolerances
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
@@ -237,8 +240,7 @@ class DS(AbstractGenAlpha):
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
         sol_p = solve(position_problem, PositionInputs(**step.shared(), smooth=smooth, f_smooth=f_smooth,
-                                                       with_forces=self.nonsmooth_forces, q_prev=state.q,
-                                                       held_closed=closing_at_end),
+                                                       with_forces=self.nonsmooth_forces, q_prev=state.q),
                       projection_start(model, qt), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
@@ -247,7 +249,8 @@ class DS(AbstractGenAlpha):
         if closing_at_end is not None:
             G_prev_v_prev = jnp.where(closing_at_end, ops.constraints.jacobian(model, qt) @ vt, G_prev_v_prev)
         velocity: VelocityAux
-        jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=position.active, f_smooth=f_smooth,
+        candidates = position.active if closing_at_end is None else position.active | closing_at_end
+        jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=candidates, f_smooth=f_smooth,
                               G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces)
         sol_v, W, velocity = velocity_jump(self.impact_law, jump, projection_start(model, qt), self.max_iter,
                                            held[2], tol.tol_r)

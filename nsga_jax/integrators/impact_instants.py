@@ -13,11 +13,11 @@ wrong (an elastic ball loses g h of speed at every bounce). With
    closing contact; its instant s* solves g(p(s)) = 0 (Newton on s, from
    the secant estimate, clipped to the span). The earliest instant wins.
 2. **Split.** The step is taken as sub-steps of the paper's DS step: up to
-   the instant (ended a small time ``late`` after it), where the position
-   correction holds the closing contacts closed, g = 0 (whatever the sign
-   of the O(s³) gap the Taylor path's instant leaves: a rotating body's
-   vertex can stop 1e-9 m short) and the velocity jump applies the impact
-   law with the velocity at the instant; then again from the post-impact
+   the instant (ended a small time ``late`` after it), where the velocity
+   jump takes the closing contacts as candidates (whatever the sign of the
+   O(s³) gap the Taylor path's instant leaves: a rotating body's vertex can
+   stop 1e-9 m short) and applies the impact law with the velocity at the
+   instant; then again from the post-impact
    state over what is left of the step, looking ahead once more. At most ``max_impacts`` instants are
    resolved in a step; what is left after them is one paper step (the
    fall-back: an accumulation, as a ball coming to rest).
@@ -26,8 +26,10 @@ wrong (an elastic ball loses g h of speed at every bounce). With
    ends at an impact, v̇̃ and a restart from the post-impact state as at t0
    (:func:`restart_after_impact`).
 
-Contacts closed at the step's start (persistent contact, a body at rest)
-are never located: the step is the paper's. Neither is an instant within
+Contacts closed at the step's start (at a round-off gap, or closed by the
+step before: active in its position correction or given an impulse, as
+persistent contact, a body at rest, a corner the rocking block turns
+about) are never located: the step is the paper's. Neither is an instant within
 ``min_fraction · h`` of either end of the span (an impact the paper's step
 already resolves to that fraction of a step).
 
@@ -39,6 +41,7 @@ first failure, and reports the state at the step's end, the number of impacts re
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 import equinox as eqx
@@ -50,6 +53,7 @@ from .._custom_types import Scalar, Vector
 from ..models.base import Model
 from ..results import RESULTS, code_of
 from .base import StepState
+from .model_terms import saddle_acceleration
 from .operators import Operators
 from .records import NewtonRecord, StepOutput
 
@@ -69,27 +73,71 @@ def open_floor(gaps: jax.Array) -> jax.Array:
     return 1e3 * eps * jnp.maximum(jnp.max(jnp.abs(gaps), initial=0.0), 1.0)
 
 
-def taylor_path(state: StepState, s: Scalar) -> Vector:
-    """p(s) = q + s v + s²/2 v̇̃: the smooth motion from the state, to O(s³) [m]."""
-    return state.q + s * state.v + 0.5 * s**2 * state.vd
+def held_acceleration(model: Model, state: StepState) -> Vector:
+    """The acceleration v̇ (n,) [m/s²] at the state with the bilateral
+    constraints and the contacts closed there (``state.closed``) held at
+    acceleration level, a frictional one sticking: the motion until the
+    next contact closes, as an event-driven integrator takes it. The smooth
+    acceleration v̇̃ leaves out the contact forces (they lie in the position
+    correction and the velocity jump): along it a block turning about a
+    resting corner falls freely, its other corner's instant O(s²) off.
+    A held contact whose multiplier pulls (λ < 0) is released and the
+    acceleration taken again without it."""
+    assert state.closed is not None, "held_acceleration needs the closed contacts"
+    q, v, t = state.q, state.v, state.t
+    nb, nc = model.n_bilateral, model.n_constraints
+    held = jnp.concatenate([jnp.ones((nb,), bool), state.closed])
+    normal = jnp.arange(nc) >= nb
+
+    def rate(x):  # the rates of the rows the motion may hold: g_q v and, with friction, g_T v
+        rows = jax.jacfwd(model.constraints)(x)
+        return rows @ v if model.n_friction == 0 else jnp.concatenate([rows, model.tangent_jacobian(x)]) @ v
+
+    rows = jax.jacfwd(model.constraints)(q)
+    if model.n_friction:
+        rows = jnp.concatenate([rows, model.tangent_jacobian(q)])
+    conv = jax.jvp(rate, (q,), (v,))[1]
+    M, f = model.mass(q), model.force(q, v, t)
+
+    def solve(held):
+        mask = held if model.n_friction == 0 else jnp.concatenate(
+            [held, jnp.repeat(held[jnp.asarray(model.friction_normals)], model.friction_dim)])
+        return saddle_acceleration(M, f, jnp.where(mask[:, None], rows, 0.0), jnp.where(mask, conv, 0.0))
+
+    _, lam = solve(held)
+    return solve(held & ~(normal & (lam[:nc] < 0.0)))[0]
+
+
+def taylor_path(state: StepState, s: Scalar, acceleration: Vector | None = None) -> Vector:
+    """p(s) = q + s v + s²/2 a: the motion from the state, to O(s³) [m], with
+    ``a`` the smooth acceleration v̇̃ (``None``) or :func:`held_acceleration`."""
+    return state.q + s * state.v + 0.5 * s**2 * (state.vd if acceleration is None else acceleration)
 
 
 def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: float, h: Scalar,
-                  together: Scalar | float = 0.0) -> tuple[jax.Array, Scalar, jax.Array]:
-    """Whether a contact open at ``state`` closes inside (0, span] along the
+                  together: Scalar | float = 0.0, hold: bool = False) -> tuple[jax.Array, Scalar, jax.Array]:
+    """Whether a contact open at ``state`` (its gap above :func:`open_floor`,
+    and not among ``state.closed``) closes inside (0, span] along the
     Taylor path, the earliest such instant s* [s] (relative to the state's
     time), and the unilateral contacts (nu,) bool that close by s* + ``together`` [s].
 
     Instants within ``min_fraction · h`` of 0 or of ``span`` are not
-    reported (the paper's step is kept for them)."""
+    reported (the paper's step is kept for them). ``hold`` (static): where
+    a contact is closed at the state, the path's acceleration is
+    :func:`held_acceleration` (dense models), else v̇̃."""
+    acceleration = None
+    if hold and state.closed is not None:
+        acceleration = lax.cond(jnp.any(state.closed), lambda: held_acceleration(model, state), lambda: state.vd)
     g0 = model.unilateral(state.q)
-    floor = open_floor(g0)
-    g1 = model.unilateral(taylor_path(state, span))
-    closing = (g0 > floor) & (g1 < 0.0)
+    is_open = g0 > open_floor(g0)
+    if state.closed is not None:  # what the last step closed stays closed (a resting contact)
+        is_open = is_open & ~state.closed
+    g1 = model.unilateral(taylor_path(state, span, acceleration))
+    closing = is_open & (g1 < 0.0)
     s = span * g0 / jnp.where(closing, g0 - g1, 1.0)  # the secant estimate
 
     def gap_and_rate(s):
-        return jax.jvp(lambda x: model.unilateral(taylor_path(state, x)), (s,), (jnp.ones_like(s),))
+        return jax.jvp(lambda x: model.unilateral(taylor_path(state, x, acceleration)), (s,), (jnp.ones_like(s),))
 
     def newton(_, s):
         g, dg = jax.vmap(lambda j, sj: jax.tree.map(lambda a: a[j], gap_and_rate(sj)))(jnp.arange(g0.shape[0]), s)
@@ -115,6 +163,15 @@ def restart_after_impact(scheme: DS, model: Model, state: StepState, impact: jax
                                                       jnp.where(impact, fresh.a, state.a)))
 
 
+def with_closed(model: Model, state: StepState, out: StepOutput) -> StepState:
+    """``state`` with the unilateral contacts its step closed: active in the
+    position correction or given an impulse by the velocity jump (a contact
+    just restituted is separating, one resting stays closed); the next step
+    does not locate them."""
+    nb = model.n_bilateral
+    return dataclasses.replace(state, closed=out.active_position[nb:] | out.active_velocity[nb:])
+
+
 def _merge(acc: StepOutput, out: StepOutput) -> StepOutput:
     """The record of a step made of sub-steps: the last sub-step's state,
     sums of impulses and iterations, the worst residual, the first failure."""
@@ -136,7 +193,8 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
 
     A step where no open contact closes is the paper's step with the run's
     operators ``ops``; a split step prepares the operators of each sub-step's size."""
-    found, _, _ = first_instant(model, state, h, scheme.min_fraction, h)
+    hold = not scheme.matrix_free(model)
+    found, _, _ = first_instant(model, state, h, scheme.min_fraction, h, hold=hold)
 
     def paper(state):
         return scheme.paper_step(model, ops, state, h)
@@ -145,12 +203,12 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
         t_end = state.t + h
 
         def take(k, st, left, acc, impacts):
-            found, s, rows = first_instant(model, st, left, scheme.min_fraction, h, scheme.late * h)
+            found, s, rows = first_instant(model, st, left, scheme.min_fraction, h, scheme.late * h, hold)
             located = found & (k < scheme.max_impacts)
             size = jnp.where(located, s + scheme.late * h, left)  # s < left - min_fraction h < left - late h
             closing = jnp.concatenate([jnp.zeros((model.n_bilateral,), bool), located & rows])
             new, out = scheme.paper_step(model, scheme.prepare(model, size, st.t), st, size, closing)
-            new = restart_after_impact(scheme, model, new, located)
+            new = restart_after_impact(scheme, model, with_closed(model, new, out), located)
             merged = out if acc is None else _merge(acc, out)
             return new, left - size, ~located, merged, impacts + located.astype(jnp.int32)
 
@@ -171,7 +229,8 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     # step): measured, the worst case over four scenes is then 1.2x the option
     # off, against 2.2x with it inside (docs/impact-instants.md, *Run time*).
     taken = paper(state)
+    taken = (with_closed(model, *taken), taken[1])
     return lax.cond(found, split, lambda _: taken, state)
 
 
-__all__ = ["restart_after_impact", "first_instant", "open_floor", "split_step", "taylor_path"]
+__all__ = ["restart_after_impact", "first_instant", "open_floor", "split_step", "taylor_path", "with_closed"]

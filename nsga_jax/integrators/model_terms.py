@@ -391,9 +391,16 @@ def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector,
         return jnp.linalg.solve(M, f)
     GB = jax.jacfwd(model.bilateral)(q0)
     conv = jax.jvp(lambda x: jax.jacfwd(model.bilateral)(x) @ v0, (q0,), (v0,))[1]
-    Minv = jnp.linalg.solve(M, jnp.concatenate([f[:, None], GB.T], axis=1))
+    return saddle_acceleration(M, f, GB, conv)[0]
+
+
+def saddle_acceleration(M: Matrix, f: Vector, G: Matrix, conv: jax.Array) -> tuple[Vector, jax.Array]:
+    """The acceleration v̇ (n,) and multipliers λ (rows,) of M v̇ = f + Gᵀ λ
+    with the rows G v̇ + conv = 0 held, λ the minimum-norm choice (module
+    :func:`consistent_acceleration`; zero rows of G take λ = 0)."""
+    Minv = jnp.linalg.solve(M, jnp.concatenate([f[:, None], G.T], axis=1))
     Minv_f, Minv_Gt = Minv[:, 0], Minv[:, 1:]
-    A = GB @ Minv_Gt
+    A = G @ Minv_Gt
     A = 0.5 * (A + A.T)  # symmetric up to round-off; the pseudo-inverse of a symmetric matrix
-    lam = jnp.linalg.pinv(A, rtol=multiplier_rtol(A.dtype), hermitian=True) @ (-conv - GB @ Minv_f)
-    return Minv_f + Minv_Gt @ lam
+    lam = jnp.linalg.pinv(A, rtol=multiplier_rtol(A.dtype), hermitian=True) @ (-conv - G @ Minv_f)
+    return Minv_f + Minv_Gt @ lam, lam

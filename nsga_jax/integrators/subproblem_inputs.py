@@ -89,11 +89,6 @@ class PositionInputs(StepInputs):
     """Whether the h² f^p term (29) is kept (DS) or dropped (DSn, CS; eq. 31b)."""
     q_prev: Vector | None = None
     """q_n, the start of the step (n,): the slip of frictional contacts is measured from it."""
-    held_closed: jax.Array | None = None
-    """(nc,) bool, or ``None``: unilateral rows the correction holds closed as
-    equalities, g = 0, whatever the sign of their gap at q̃: the contacts of a
-    sub-step that ends at a located impact instant
-    (:mod:`~nsga_jax.integrators.impact_instants`)."""
 
 
 class VelocityInputs(StepInputs):

@@ -140,8 +140,6 @@ def position_problem(inputs: PositionInputs) -> Problem:
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
-    if inputs.held_closed is not None:  # closing at a located instant: g = 0 (module impact_instants)
-        unilateral = unilateral & ~inputs.held_closed
     law: NormalLaw | FrictionLaw = NormalLaw(True, unilateral, kp, pp)
     GT = None
     if has_friction(model):
