@@ -19,6 +19,12 @@ solution and the run time (compile apart: ``stats["wall_time_s"]``):
   first impact (one vertex; ``metrics.first_rebound``: the vertex's normal
   rates extrapolated to the instant from either side), and the energy made
   over the run, max E / E(0) - 1;
+- ``cradle``: Newton's cradle, five balls 1.03 mm apart, e = 0.9, ball 1
+  thrown at 1 m/s, 0.5 s (ten collisions, two of them in one step at
+  h = 2 ms): max |x - x_exact| of the centres [m];
+- ``rocking_block``: Housner's block (ρ∞ = 0.8), 3 s: the largest error of
+  its landing times against the exact ones while they are resolvable
+  (10 steps apart at least) [s]; a landing is seen at the record after it;
 - ``resting_ball``: e = 0.5, 3 s (its impacts accumulate at 1.355 s):
   run time, and |z|, |v| at the end;
 - ``slider_crank``: e = 1 at the stop, ρ∞ = 1 (no numerical damping), 0.1 s:
@@ -49,7 +55,7 @@ from nsga_jax.process_settings import configure_jax  # noqa: E402
 configure_jax()
 
 import nsga_jax as nj  # noqa: E402
-from nsga_jax.exact import bouncing_ball  # noqa: E402
+from nsga_jax.exact import bouncing_ball, newtons_cradle, rocking_impact_times  # noqa: E402
 from nsga_jax.metrics import first_rebound  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
@@ -108,6 +114,26 @@ def resting_ball(sol, scene):
     return float(max(abs(sol.q[-1, 0]), abs(sol.v[-1, 0]))), {}
 
 
+def cradle(sol, scene):
+    x, _ = newtons_cradle(np.asarray(sol.ts), np.asarray(scene.q0), np.asarray(scene.v0), 0.1, 0.01, 0.9)
+    return float(np.abs(np.asarray(sol.q) - x).max()), {}
+
+
+def rocking_block(sol, scene):
+    p = scene.parameters
+    exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
+    h = float(sol.ts[1] - sol.ts[0])
+    resolvable = exact[: int(np.argmax(np.diff(exact, prepend=0.0) < 10 * h))]  # 10 steps apart at least
+    theta = np.asarray(sol.observables["theta"])
+    sign = np.sign(np.where(np.abs(theta) < 1e-12, 0.0, theta))
+    nonzero = np.nonzero(sign)[0]
+    measured = np.asarray(sol.ts)[nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]]
+    n = min(len(measured), len(resolvable))
+    return float(np.abs(measured[:n] - resolvable[:n]).max()), {
+        "landings to the last resolvable": int(np.sum(measured <= resolvable[-1])),
+        "resolvable exact landings": len(resolvable)}
+
+
 def slider_crank(sol, scene):
     energy = np.asarray(scene.observables(sol)["energy"])
     change = float(energy[-1] / energy[0] - 1.0) if np.isfinite(energy[-1]) else math.nan
@@ -125,6 +151,10 @@ CASES = {  # name: (scene, overrides, t_end [s], ρ∞, step sizes [s], measure,
                         "max error of θ, ω [rad, rad/s]"),
     "spinning_box": ("rigid_box", {"e": 0.8}, 1.0, 0.8, (1e-2, 5e-3, 2e-3, 1e-3, 5e-4), spinning_box,
                      "abs(e_eff - e) at the first impact"),
+    "cradle": ("newtons_cradle", {"e": 0.9, "gap": 1.03e-3}, 0.5, 1.0, (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4), cradle,
+               "max abs(x - x_exact) [m]"),
+    "rocking_block": ("rocking_block", {}, 3.0, 0.8, (4e-3, 2e-3, 1e-3, 5e-4), rocking_block,
+                      "max error of the landing times [s]"),
     "resting_ball": ("bouncing_ball", {"e": 0.5}, 3.0, 0.8, (1e-3,), resting_ball, "max(abs(z), abs(v)) at 3 s"),
     "slider_crank": ("slider_crank", {"e": 1.0}, 0.1, 1.0, (1e-4, 5e-5), slider_crank, "abs(energy change)"),
 }
@@ -189,8 +219,8 @@ def plot(rows, path: Path) -> None:
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    cases = ["elastic_ball", "ball", "slipping_ball", "double_pendulum", "spinning_box"]
-    fig, axes = plt.subplots(2, 3, figsize=(15.0, 8.0))
+    cases = ["elastic_ball", "ball", "slipping_ball", "double_pendulum", "spinning_box", "cradle", "rocking_block"]
+    fig, axes = plt.subplots(2, 4, figsize=(19.0, 8.0))
     axes.flat[-1].set_axis_off()
     for ax, case in zip(axes.flat, cases):
         for (label, _), marker in zip(VARIANTS, ("o", "s")):

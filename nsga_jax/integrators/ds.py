@@ -209,17 +209,24 @@ class DS(AbstractGenAlpha):
             return split_step(self, model, ops, state, h)
         return self.paper_step(model, ops, state, h)
 
+    def impact_operators(self, model: Model, t: Scalar) -> Operators:
+        """The operators of an impact of zero duration
+        (:func:`~nsga_jax.integrators.impact_instants.impact_jump`): the
+        velocity jump's iteration matrix is M (h = 0 in S_t^{v*})."""
+        mass = lambda M, K, C: M  # noqa: E731
+        return prepare_operators(model, t, self.matrix_kinds(model), (mass, mass, mass), enabled=self.fast_paths,
+                                 tol_r=self.tol_r)
+
     def paper_step(self, model: Model, ops: Operators, state: StepState, h: Scalar,
-                   closing_at_end: jax.Array | None = None) -> tuple[StepState, StepOutput]:
+                   left_open: jax.Array | None = None) -> tuple[StepState, StepOutput]:
         """The paper's step of size h [s] (Algorithm 1): the new state and the step's record.
 
-        ``closing_at_end`` (nc,) bool: the contacts a sub-step closes at its
-        end, a located impact instant (:mod:`~nsga_jax.integrators.impact_instants`):
-        the velocity jump takes them as candidates (whatever the sign of the
-        gap the O(s³) located instant leaves after the position correction)
-        and their Newton restitution takes the pre-impact rate at the end of
-        the smooth motion, g_q(q̃) ṽ, in place of the step's start,
-        g_q(q_n) v_n; ``None``: neither, as in the paper."""
+        ``left_open`` (nc,) bool: constraint rows neither sub-problem may
+        activate: the contacts a sub-step leaves open up to their located
+        impact instant, at its end, where
+        :func:`~nsga_jax.integrators.impact_instants.impact_jump` applies the
+        impact (:mod:`~nsga_jax.integrators.impact_instants`); ``None``: none,
+        as in the paper."""
         tol = self.tolerances
         t = state.t + h
         a_pred, v_pred, q_pred = self.predict(state, h)
@@ -240,17 +247,15 @@ class DS(AbstractGenAlpha):
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
         sol_p = solve(position_problem, PositionInputs(**step.shared(), smooth=smooth, f_smooth=f_smooth,
-                                                       with_forces=self.nonsmooth_forces, q_prev=state.q),
+                                                       with_forces=self.nonsmooth_forces, q_prev=state.q,
+                                                       left_open=left_open),
                       projection_start(model, qt), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
         # 3. velocity jump
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
-        if closing_at_end is not None:
-            G_prev_v_prev = jnp.where(closing_at_end, ops.constraints.jacobian(model, qt) @ vt, G_prev_v_prev)
         velocity: VelocityAux
-        candidates = position.active if closing_at_end is None else position.active | closing_at_end
-        jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=candidates, f_smooth=f_smooth,
+        jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=position.active, f_smooth=f_smooth,
                               G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces)
         sol_v, W, velocity = velocity_jump(self.impact_law, jump, projection_start(model, qt), self.max_iter,
                                            held[2], tol.tol_r)

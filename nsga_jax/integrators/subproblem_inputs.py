@@ -89,6 +89,10 @@ class PositionInputs(StepInputs):
     """Whether the h² f^p term (29) is kept (DS) or dropped (DSn, CS; eq. 31b)."""
     q_prev: Vector | None = None
     """q_n, the start of the step (n,): the slip of frictional contacts is measured from it."""
+    left_open: jax.Array | None = None
+    """(nc,) bool, or ``None``: rows the correction never activates, the
+    contacts a sub-step leaves open up to their located impact instant
+    (:mod:`~nsga_jax.integrators.impact_instants`)."""
 
 
 class VelocityInputs(StepInputs):

@@ -140,13 +140,14 @@ def position_problem(inputs: PositionInputs) -> Problem:
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
-    law: NormalLaw | FrictionLaw = NormalLaw(True, unilateral, kp, pp)
+    candidates = True if inputs.left_open is None else ~inputs.left_open
+    law: NormalLaw | FrictionLaw = NormalLaw(candidates, unilateral, kp, pp)
     GT = None
     if has_friction(model):
         assert q_prev is not None, "friction at position level needs the state q_n"
         # the slip over the step by the midpoint rule: exact to O(|q̃ - q_n|³) on a turning body
         GT = model.tangent_jacobian(0.5 * (q_prev + smooth.q))
-        law = FrictionLaw.of(model, True, unilateral, kp, pp, None, GT)  # tangential penalty pp, as the normal
+        law = FrictionLaw.of(model, candidates, unilateral, kp, pp, None, GT)  # tangential penalty pp, as the normal
     curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
     GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
