@@ -169,8 +169,10 @@ def _convergence(args) -> int:
             errs = ", ".join(f"{k} {e:.3e}" for k, e in r.errors.items())
             it = r.iterations["linear_solves"]
             fail = f", {r.failed_steps} failed steps ({r.result})" if r.failed_steps else ""
+            located = (f"; impacts at their instants {r.impacts_at_instants} ({r.instant_fallbacks} steps fell back)"
+                       if r.impacts == "instants" else "")
             print(f"{r.scheme:>3} h = {r.h:<8g} {errs}; solves/step {it['mean']:.2f} (max {it['max']}); "
-                  f"{r.wall_time_s:.3f} s{fail}")
+                  f"{r.wall_time_s:.3f} s{fail}{located}")
         print("wrote " + ", ".join(str(p) for p in paths.values()))
         return 0
 

@@ -149,12 +149,19 @@ class StudyRow:
     iterations: dict
     errors: dict = field(default_factory=dict)
     batch_size: int = 1
+    impacts: str = "end"
+    """Where impacts were applied: ``"end"`` (the paper's step) or ``"instants"``."""
+    impacts_at_instants: int = 0
+    instant_fallbacks: int = 0
 
     def flat(self) -> dict:
         row = {"scheme": self.scheme, "h": self.h, "n_steps": self.n_steps, "batch_size": self.batch_size,
                "wall_time_s": self.wall_time_s,
                "compile_time_s": self.compile_time_s, "failed_steps": self.failed_steps,
                "first_failure_t": self.first_failure_t, "result": self.result}
+        if self.impacts == "instants":
+            row.update(impacts=self.impacts, impacts_at_instants=self.impacts_at_instants,
+                       instant_fallbacks=self.instant_fallbacks)
         for sub, st in self.iterations.items():
             row[f"{sub}_mean"] = st["mean"]
             row[f"{sub}_max"] = st["max"]
@@ -200,6 +207,8 @@ def study(scene_name: str, schemes, hs, reference: Reference, overrides: dict | 
                 first_failure_t=float(sol.ts[failed[0]]) if failed.size else math.nan,
                 result=st["result"], iterations=st["iterations"], errors=errors,
                 batch_size=sum(s.wall_time == sol.wall_time and s.compile_time == sol.compile_time for s in sols),
+                impacts=scene.solver.get("impacts", "end"), impacts_at_instants=int(st["impacts_at_instants"]),
+                instant_fallbacks=int(st["instant_fallbacks"]),
             ))
     return rows
 

@@ -12,7 +12,8 @@ order) and ``DIR/sweep.png`` plots the main columns against the swept values.
 
 Each row has the member's parameters and h, what the scheme did (steps,
 result, failed steps, linear solves per step, largest penetration and
-bilateral violations, over every step), the final value, minimum and maximum
+bilateral violations, over every step; with ``impacts = "instants"`` the
+impacts located at their instants and the steps that fell back), the final value, minimum and maximum
 of each scalar observable, and, where the scene has an exact solution, the
 eq. 52 error of its observables (on the recorded steps, at most
 ``max_records`` per member).
@@ -163,6 +164,8 @@ def _row(member: Member, sol: Solution) -> dict[str, Any]:
         "max_bilateral_violation": st["max_bilateral_violation_position"],
         "max_bilateral_rate_violation": st["max_bilateral_violation_velocity"],
     })
+    if scene.solver.get("impacts", "end") == "instants":  # what the located impacts did
+        row.update({"impacts_at_instants": st["impacts_at_instants"], "instant_fallbacks": st["instant_fallbacks"]})
     view = float64_view(sol)
     obs = {k: np.asarray(v) for k, v in scene.observables(view).items()}
     for name, y in obs.items():

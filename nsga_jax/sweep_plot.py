@@ -28,6 +28,8 @@ _COUNTS = {
     "solves_per_step_max": "max linear solves per step",
     "n_steps": "steps",
     "failed_steps": "failed steps",
+    "impacts_at_instants": "impacts located at their instants",
+    "instant_fallbacks": "steps that fell back to the paper's step",
     "max_penetration": "max penetration [m]",
     "max_bilateral_violation": "max bilateral violation (constraint units)",
     "max_bilateral_rate_violation": "max bilateral rate violation (constraint units / s)",

@@ -218,6 +218,26 @@ def test_newtons_cradle_follows_the_exact_sequence_of_collisions():
     assert errors["instants"] < 1e-9 and errors["paper"] > 1e-4, errors
 
 
+def test_matrix_free_cube_locates_its_landing_as_the_dense_path():
+    """The flexible cube (§4.4, 3 divisions, e = 0) dropped from 1 cm onto the
+    floor: its 16 bottom nodes land together at the free-fall instant
+    sqrt(2 · 0.01 / g) = 45.15 ms. The matrix-free path (conjugate gradients
+    on element blocks, the impact's jump included) locates it as one impact,
+    as the dense path does, and the two runs agree to the Krylov tolerance."""
+    cube = load_scene("flexible_cube", {"divisions": 3, "height": 0.06, "e": 0.0})
+    runs = {}
+    for name, krylov_min_dof in (("matrix-free", 0), ("dense", None)):
+        scheme = nj.DS(rho_inf=cube.scheme().rho_inf, impact_instants=True, krylov_min_dof=krylov_min_dof)
+        assert scheme.matrix_free(cube.model) == (name == "matrix-free")
+        sol = nj.simulate(cube.model, scheme, 0.0, 0.047, 3e-5, cube.q0, cube.v0)
+        assert sol.stats["failed_steps"] == 0 and sol.stats["impacts_at_instants"] == 1, sol.stats
+        landing = float(sol.ts[int(np.argmax(np.any(np.asarray(sol.records.impulse) != 0.0, axis=1)))])
+        assert landing - 3e-5 < math.sqrt(2 * 0.01 / 9.81) <= landing
+        runs[name] = sol
+    assert np.abs(runs["matrix-free"].q - runs["dense"].q).max() < 1e-10
+    assert np.abs(runs["matrix-free"].v - runs["dense"].v).max() < 1e-8
+
+
 def test_first_rebound_measures_the_exact_ball():
     """metrics.first_rebound on the ball (e = 0.8, impacts at their instants:
     exact to round-off): the instant √(2 h0 / g) and the rates ∓√(2 g h0) and
@@ -253,7 +273,13 @@ def test_sweep_convergence_and_identify_carry_the_option(tmp_path):
         out = tmp_path / impacts
         assert main(["sweep", "bouncing_ball", *common, "--set", f"impacts={impacts}", "--out", str(out)]) == 0
         with open(out / "sweep.csv") as f:
-            errors[impacts] = [float(row["abs_error_z"]) for row in csv.DictReader(f)]
+            rows = list(csv.DictReader(f))
+        errors[impacts] = [float(row["abs_error_z"]) for row in rows]
+        if impacts == "instants":  # each member's located impacts, counted: the elastic ball's are exact
+            counts = {float(row["e"]): int(row["impacts_at_instants"]) for row in rows}
+            assert counts[1.0] == len(bouncing_ball_impacts(1.0, 0.0, G, 1.0, 3.0)[0]) and counts[0.5] > 5, rows
+        else:
+            assert "impacts_at_instants" not in rows[0]
     assert max(errors["instants"]) < 1e-9, errors
     assert min(errors["end"]) > 1e-3, errors
     out = tmp_path / "convergence"
@@ -262,6 +288,7 @@ def test_sweep_convergence_and_identify_carry_the_option(tmp_path):
     with open(out / "study.csv") as f:
         rows = list(csv.DictReader(f))
     assert rows and all(float(row["error_z"]) < 1e-10 for row in rows), rows
+    assert all(row["impacts"] == "instants" and int(row["impacts_at_instants"]) > 0 for row in rows), rows
     out = tmp_path / "identify"
     identify = ["identify", "bouncing_ball", "--params", "e", "--synthetic", "--true", "e=0.7", "--initial", "e=0.5",
                 "--set", "impacts=instants", "--t-end", "2", "--h", "1e-3", "--no-plots", "--out", str(out)]

@@ -124,7 +124,7 @@ def rocking_block(sol, scene):
     exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
     h = float(sol.ts[1] - sol.ts[0])
     resolvable = exact[: int(np.argmax(np.diff(exact, prepend=0.0) < 10 * h))]  # 10 steps apart at least
-    theta = np.asarray(sol.observables["theta"])
+    theta = np.asarray(scene.observables(sol)["theta"])
     sign = np.sign(np.where(np.abs(theta) < 1e-12, 0.0, theta))
     nonzero = np.nonzero(sign)[0]
     measured = np.asarray(sol.ts)[nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]]

@@ -126,15 +126,16 @@ def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: fl
 
     Instants within ``min_fraction · h`` of 0 or of ``span`` are not
     reported (the paper's step is kept for them). ``hold`` (static): where
-    a contact is closed at the state, the path's acceleration is
-    :func:`held_acceleration` (dense models), else v̇̃."""
-    acceleration = None
-    if hold and state.closed is not None:
-        acceleration = lax.cond(jnp.any(state.closed), lambda: held_acceleration(model, state), lambda: state.vd)
+    a contact is closed at the state and another is open, the path's
+    acceleration is :func:`held_acceleration` (dense models), else v̇̃."""
     g0 = model.unilateral(state.q)
     is_open = g0 > open_floor(g0)
     if state.closed is not None:  # what the last step closed stays closed (a resting contact)
         is_open = is_open & ~state.closed
+    acceleration = None
+    if hold and state.closed is not None:  # only where a contact is closed and another may close
+        acceleration = lax.cond(jnp.any(state.closed) & jnp.any(is_open), lambda: held_acceleration(model, state),
+                                lambda: state.vd)
     g1 = model.unilateral(taylor_path(state, span, acceleration))
     closing = is_open & (g1 < 0.0)
     s = span * g0 / jnp.where(closing, g0 - g1, 1.0)  # the secant estimate
