@@ -96,8 +96,12 @@ class ImpactTimeAdjoint(AbstractAdjoint):
     the previous step's, approaching at t_n), the state keeps the scheme's
     value and takes the derivative of the step rebuilt in continuous time
     (:func:`~nsga_jax.impact_time.with_impact_time_sensitivity`), which adds
-    the saltation term of the moving impact instant. Carries the contacts'
-    last velocity active set, shape (nu,).
+    the saltation term of the moving impact instant. With
+    ``DS(impact_instants=True)`` a step split at its located instants keeps
+    the discrete derivative, which already moves them with the parameters;
+    an impact that a paper step takes (a contact closed at the start,
+    chatter) is rebuilt as above. Carries the contacts' last velocity active
+    set, shape (nu,).
     """
 
     def init(self, model: Model, q0: Vector) -> jax.Array:
@@ -113,15 +117,13 @@ class ImpactTimeAdjoint(AbstractAdjoint):
             raise ConfigError(f"ImpactTimeAdjoint rebuilds an impact with Newton's law, not the impact_law = "
                               f"{law!r} of {type(scheme).__name__} (with friction they differ); use "
                               "DiscreteAdjoint(), the derivative of the energetic law as it runs")
-        if getattr(scheme, "impact_instants", False):
-            raise ConfigError(f"ImpactTimeAdjoint rebuilds an impact at the end of its step, not at the instant "
-                              f"{type(scheme).__name__}(impact_instants=True) locates inside it; use "
-                              "DiscreteAdjoint(), which differentiates the split step, the located instant included")
         new, out = scheme.step(model, ops, state, h)
         if model.n_unilateral == 0:
             return new, out, extra
+        # a step split at its located instants (DS(impact_instants=True)) is differentiated as it ran
+        located = out.instants > 0 if getattr(scheme, "impact_instants", False) else False
         with jax.named_scope("impact_time_sensitivity"):
-            new, out = with_impact_time_sensitivity(model, ops, state, new, out, h, extra)
+            new, out = with_impact_time_sensitivity(model, ops, state, new, out, h, extra, located)
         return new, out, out.active_velocity[model.n_bilateral:]
 
 

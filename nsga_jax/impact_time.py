@@ -148,14 +148,17 @@ def rebuilt_step(model: Model, ops: Operators, state: StepState, out: StepOutput
 
 
 def with_impact_time_sensitivity(model: Model, ops: Operators, state: StepState, new: StepState,
-                                 out: StepOutput, h: Scalar, was_active: jax.Array) -> tuple[StepState, StepOutput]:
+                                 out: StepOutput, h: Scalar, was_active: jax.Array,
+                                 located: jax.Array | bool = False) -> tuple[StepState, StepOutput]:
     """The step's state and record with the same values, and at a step where a
     contact closes, the derivative of :func:`rebuilt_step` in place of the
     scheme's derivative of (q, v). ``was_active``: the previous step's velocity
-    active set on the contacts (nu,)."""
+    active set on the contacts (nu,). ``located``: the step was split at its
+    impact instants (``DS(impact_instants=True)``), whose derivative already
+    moves the instants with the parameters: kept as the scheme's."""
     G_n = dense_jacobian(model, ops, state.q)
     closing = lax.stop_gradient(closing_contacts(model, G_n, state, out, was_active))
-    any_closing = jnp.any(closing)
+    any_closing = jnp.any(closing) & ~jnp.asarray(located)
 
     # checkpointed: a cond's residuals are stored for every step (zeros where the
     # branch is not taken), and the rebuild's dense factorisations would make
