@@ -11,7 +11,13 @@ import pytest
 
 import nsga_jax as nj
 from nsga_jax.batch import simulate_batch
-from nsga_jax.exact import bouncing_ball, bouncing_ball_impacts, newtons_cradle, newtons_cradle_collisions
+from nsga_jax.exact import (
+    bouncing_ball,
+    bouncing_ball_impacts,
+    newtons_cradle,
+    newtons_cradle_collisions,
+    rocking_impact_times,
+)
 from nsga_jax.metrics import first_rebound
 from nsga_jax.scenes import load_scene, parametrize
 
@@ -108,6 +114,26 @@ def test_every_driver_runs_the_same_split_steps():
     assert [m.stats["impacts_at_instants"] for m in members] == [impacts, impacts]
     z, _ = bouncing_ball(members[1].ts, 1.0, 0.0, G, 0.8)
     assert np.abs(members[1].q[:, 0] - z).max() < 1e-9
+
+
+def test_batch_of_rocking_blocks_splits_each_member_as_its_own_run():
+    """A batch over step sizes of the rocking block (friction, a resting
+    corner held in the path's acceleration, landings at different steps in
+    each member): every member is its own run to round-off, with the same
+    located landings."""
+    block = load_scene("rocking_block", {})
+    scheme = nj.DS(rho_inf=0.8, impact_instants=True)
+    hs = [1e-3, 2e-3]
+    members = simulate_batch(block.model, scheme, 0.0, 0.7, hs, block.q0, block.v0)
+    p = block.parameters
+    exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 2)  # 0.2580 s, 0.6357 s
+    for h, member in zip(hs, members):
+        alone = nj.simulate(block.model, scheme, 0.0, 0.7, h, block.q0, block.v0)
+        np.testing.assert_allclose(member.q, alone.q, rtol=0, atol=1e-12)
+        assert member.stats["failed_steps"] == alone.stats["failed_steps"] == 0
+        assert member.stats["impacts_at_instants"] == alone.stats["impacts_at_instants"] == 2
+        located = member.ts[np.nonzero(member.records.instants)[0]]  # the ends of the steps that hold them
+        assert np.abs(located - exact).max() < 2 * h, (h, located, exact)
 
 
 def test_gradient_through_the_located_instant_is_the_exact_one():
