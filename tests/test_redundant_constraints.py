@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.integrators.model_terms import consistent_acceleration, multiplier_rtol
+from nsga_jax.integrators.linalg import multiplier_rtol
+from nsga_jax.integrators.model_terms import consistent_acceleration
 from nsga_jax.models.redundancy import RedundantConstraintsWarning, bilateral_redundancy
 from nsga_jax.precision import cast_floats
 from nsga_jax.scenes import load_scene

@@ -55,7 +55,7 @@ from ..results import RESULTS, code_of
 from .base import StepState
 from .friction import projection_start
 from .impact_law import velocity_jump
-from .model_terms import saddle_acceleration
+from .linalg import saddle_acceleration
 from .operators import Operators
 from .records import NewtonRecord, StepOutput, SubproblemRecord, make_output, subproblem_result
 from .subproblem_inputs import Smooth, VelocityInputs

@@ -326,3 +326,34 @@ def solve_bordered(
     dx = -y + k * (A_inv_Gt @ dmu_red)
     dmu = dmu_red + (p / k**2) * r2
     return dx, dmu
+
+
+MULTIPLIER_RTOL = 1e-10
+"""Relative cut of the pseudo-inverse in :func:`saddle_acceleration`
+(:func:`~nsga_jax.integrators.model_terms.consistent_acceleration`):
+eigenvalues of G M⁻¹ Gᵀ below ``rtol`` times the largest are those of
+redundant rows (their round-off is about eps times the largest, far below),
+never of a mechanism's regular rows (a condition number above 1e10 would be
+one). The cut in use is :func:`multiplier_rtol`, never below the precision's
+round-off."""
+
+
+def multiplier_rtol(dtype) -> float:
+    """The pseudo-inverse's relative cut in precision ``dtype``:
+    ``max(MULTIPLIER_RTOL, 1e3 eps)`` (1e-10 in float64, 1.2e-4 in float32)."""
+    return max(MULTIPLIER_RTOL, 1e3 * float(jnp.finfo(dtype).eps))
+
+
+def saddle_acceleration(M: Matrix, f: Vector, G: Matrix, conv: jax.Array) -> tuple[Vector, jax.Array]:
+    """The acceleration v̇ (n,) and multipliers λ (rows,) of M v̇ = f + Gᵀ λ
+    with the rows G v̇ + conv = 0 held (M symmetric positive definite), λ
+    the minimum-norm choice, (G M⁻¹ Gᵀ)⁺ (-conv - G M⁻¹ f), the pseudo-inverse
+    cut at :func:`multiplier_rtol` (redundant rows share the load; zero rows
+    take λ = 0): :func:`~nsga_jax.integrators.model_terms.consistent_acceleration`
+    and the held contacts of :mod:`~nsga_jax.integrators.impact_instants`."""
+    Minv = jnp.linalg.solve(M, jnp.concatenate([f[:, None], G.T], axis=1))
+    Minv_f, Minv_Gt = Minv[:, 0], Minv[:, 1:]
+    A = G @ Minv_Gt
+    A = 0.5 * (A + A.T)  # symmetric up to round-off; the pseudo-inverse of a symmetric matrix
+    lam = jnp.linalg.pinv(A, rtol=multiplier_rtol(A.dtype), hermitian=True) @ (-conv - G @ Minv_f)
+    return Minv_f + Minv_Gt @ lam, lam

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from .._custom_types import Matrix, Scalar, Vector
 from ..blocks import KroneckerMass, NodeBlockMatrix, NodeRows
 from ..models.base import Model
-from .linalg import band_product
+from .linalg import band_product, saddle_acceleration
 
 # ------------------------------------------------------------------------- mass
 
@@ -348,21 +348,6 @@ def restitution(model: Model, dtype) -> jax.Array:
     return jnp.concatenate([jnp.zeros((model.n_bilateral,), dtype), jnp.asarray(model.restitution, dtype)])
 
 
-MULTIPLIER_RTOL = 1e-10
-"""Relative cut of the pseudo-inverse in :func:`consistent_acceleration`:
-eigenvalues of G M⁻¹ Gᵀ below ``rtol`` times the largest are those of
-redundant rows (their round-off is about eps times the largest, far below),
-never of a mechanism's regular rows (a condition number above 1e10 would be
-one). The cut in use is :func:`multiplier_rtol`, never below the precision's
-round-off."""
-
-
-def multiplier_rtol(dtype) -> float:
-    """The pseudo-inverse's relative cut in precision ``dtype``:
-    ``max(MULTIPLIER_RTOL, 1e3 eps)`` (1e-10 in float64, 1.2e-4 in float32)."""
-    return max(MULTIPLIER_RTOL, 1e3 * float(jnp.finfo(dtype).eps))
-
-
 def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector,
                             mass_solve: Callable[[Vector], Vector] | None = None) -> Vector:
     """v̇̃_0 from the equations of motion with the bilateral constraints at
@@ -377,7 +362,7 @@ def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector,
         (G M⁻¹ Gᵀ) λ = -c - G M⁻¹ f,   v̇ = M⁻¹ (f + Gᵀ λ),
 
     with the minimum-norm λ = (G M⁻¹ Gᵀ)⁺ (-c - G M⁻¹ f) (pseudo-inverse cut
-    at :func:`multiplier_rtol`). Where G has full row rank this is the
+    at :func:`~nsga_jax.integrators.linalg.multiplier_rtol`). Where G has full row rank this is the
     saddle system's unique solution; where it is rank deficient (redundant
     joints, a closed loop built in 3D) v̇ is still unique and λ is the
     smallest that holds the constraints: identical rows share the load
@@ -392,15 +377,3 @@ def consistent_acceleration(model: Model, t0: Scalar, q0: Vector, v0: Vector,
     GB = jax.jacfwd(model.bilateral)(q0)
     conv = jax.jvp(lambda x: jax.jacfwd(model.bilateral)(x) @ v0, (q0,), (v0,))[1]
     return saddle_acceleration(M, f, GB, conv)[0]
-
-
-def saddle_acceleration(M: Matrix, f: Vector, G: Matrix, conv: jax.Array) -> tuple[Vector, jax.Array]:
-    """The acceleration v̇ (n,) and multipliers λ (rows,) of M v̇ = f + Gᵀ λ
-    with the rows G v̇ + conv = 0 held, λ the minimum-norm choice (module
-    :func:`consistent_acceleration`; zero rows of G take λ = 0)."""
-    Minv = jnp.linalg.solve(M, jnp.concatenate([f[:, None], G.T], axis=1))
-    Minv_f, Minv_Gt = Minv[:, 0], Minv[:, 1:]
-    A = G @ Minv_Gt
-    A = 0.5 * (A + A.T)  # symmetric up to round-off; the pseudo-inverse of a symmetric matrix
-    lam = jnp.linalg.pinv(A, rtol=multiplier_rtol(A.dtype), hermitian=True) @ (-conv - G @ Minv_f)
-    return Minv_f + Minv_Gt @ lam, lam
