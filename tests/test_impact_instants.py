@@ -319,3 +319,42 @@ def test_sweep_convergence_and_identify_carry_the_option(tmp_path):
         assert main([*identify[:-1], str(folder), "--adjoint", adjoint]) == 0
         found = json.loads((folder / "identification.json").read_text())
         assert found["recovered"]["e"] == pytest.approx(0.7, abs=1e-10), (adjoint, found)
+
+
+def test_hermite_path_interpolates_the_smooth_motion():
+    """The cubic the look-ahead falls back on passes through (q, v) at s = 0
+    and (q̃, ṽ) at s = span, and is exact for a cubic motion."""
+    from nsga_jax.integrators.base import StepState
+    from nsga_jax.integrators.impact_instants import hermite_path
+
+    motion = lambda s: np.array([1.0 + 2.0 * s - 3.0 * s**2 + 0.5 * s**3, -s**3])  # noqa: E731
+    rate = lambda s: np.array([2.0 - 6.0 * s + 1.5 * s**2, -3.0 * s**2])  # noqa: E731
+    z = np.zeros(2)
+    state = StepState(t=0.0, q=motion(0.0), v=rate(0.0), vd=z, a=z)
+    path = hermite_path(state, (motion(0.7), rate(0.7)), 0.7)
+    for s in (0.0, 0.2, 0.55, 0.7):
+        np.testing.assert_allclose(path(s), motion(s), atol=1e-14)
+    np.testing.assert_allclose(jax.jacfwd(path)(0.7), rate(0.7), atol=1e-13)
+
+
+def test_slider_crank_stop_keeps_the_energy_of_its_elastic_impacts():
+    """The slider-crank's slider strikes its stop (e = 1, ρ∞ = 1) at 0.0412 s
+    and chatters against it, pulled back by its stiff rod, four to five times
+    within 0.5 ms. At h = 50 µs the Taylor path misses a re-closing the rod's
+    discrete motion makes (its end leaves the slider 22 µm from the stop):
+    it is located on the smooth motion's cubic instead. Every step with an
+    impulse at the stop then holds a located instant, and the energy after
+    the impacts (a 1 ms mean: the rod vibrates) is within 1 % of its start,
+    where the paper's step loses 12 %."""
+    scene = load_scene("slider_crank", {"e": 1.0})
+    kept = {}
+    for name, scheme in (("instants", nj.DS(rho_inf=1.0, impact_instants=True)), ("paper", nj.DS(rho_inf=1.0))):
+        sol = nj.simulate(scene.model, scheme, 0.0, 0.044, 5e-5, scene.q0, scene.v0)
+        energy = np.asarray(scene.observables(sol)["energy"])
+        at_stop = np.asarray(sol.records.impulse)[:, -1] != 0.0
+        assert sol.stats["failed_steps"] == 0 and at_stop.sum() >= 4
+        after = np.asarray(sol.ts) > np.asarray(sol.ts)[at_stop][-1] + 1e-3
+        kept[name] = energy[after].mean() / energy[0] - 1.0
+        if name == "instants":
+            assert np.all(np.asarray(sol.records.instants)[at_stop] > 0), np.asarray(sol.records.instants)[at_stop]
+    assert abs(kept["instants"]) < 1e-2 and kept["paper"] < -0.1, kept

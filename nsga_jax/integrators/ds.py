@@ -207,7 +207,7 @@ class DS(AbstractGenAlpha):
         otherwise (the default) this is the paper's step, :meth:`paper_step`."""
         if self.impact_instants and model.n_unilateral:
             return split_step(self, model, ops, state, h)
-        return self.paper_step(model, ops, state, h)
+        return self.paper_step(model, ops, state, h)[:2]
 
     def impact_operators(self, model: Model, t: Scalar) -> Operators:
         """The operators of an impact of zero duration
@@ -218,8 +218,11 @@ class DS(AbstractGenAlpha):
                                  tol_r=self.tol_r)
 
     def paper_step(self, model: Model, ops: Operators, state: StepState, h: Scalar,
-                   left_open: jax.Array | None = None) -> tuple[StepState, StepOutput]:
-        """The paper's step of size h [s] (Algorithm 1): the new state and the step's record.
+                   left_open: jax.Array | None = None) -> tuple[StepState, StepOutput, tuple[Vector, Vector]]:
+        """The paper's step of size h [s] (Algorithm 1): the new state, the
+        step's record and the smooth motion's end (q̃, ṽ) (n,), (n,) before
+        any correction (where a contact the look-ahead missed is located,
+        :func:`~nsga_jax.integrators.impact_instants.split_step`).
 
         ``left_open`` (nc,) bool: constraint rows neither sub-problem may
         activate: the contacts a sub-step leaves open up to their located
@@ -242,7 +245,7 @@ class DS(AbstractGenAlpha):
         if model.n_constraints == 0:  # nothing to project: U = W = 0 exactly
             newton = NewtonRecord.of(self.subproblems, {"smooth": SubproblemRecord.of(sol_s)}, qt.dtype)
             out = make_output(model, t, qt, vt, smooth.lam, newton, subproblem_result("smooth", sol_s))
-            return self.finalise(t, qt, vt, vd, a_pred, kept([sol_s], state)), out
+            return self.finalise(t, qt, vt, vd, a_pred, kept([sol_s], state)), out, (qt, vt)
 
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
@@ -270,7 +273,7 @@ class DS(AbstractGenAlpha):
             impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
             active_position=position.active, active_velocity=velocity.active, friction=velocity.friction,
         )
-        return self.finalise(t, q, v, vd, a_pred, kept(results, state)), out
+        return self.finalise(t, q, v, vd, a_pred, kept(results, state)), out, (qt, vt)
 
 
 def kept(results, state: StepState) -> tuple | None:

@@ -12,6 +12,10 @@ wrong (an elastic ball loses g h of speed at every bounce). With
    floor, :func:`open_floor`) and closed at the end of the span left is a
    closing contact; its instant s* solves g(p(s)) = 0 (Newton on s, from
    the secant estimate, clipped to the span). The earliest instant wins.
+   Where the path sees no contact close but the paper's step (taken
+   anyway) closes one that was open at the start, the instant is located
+   in the same way on the smooth motion's own cubic (:func:`hermite_path`):
+   a stiff member's discrete motion departs from any short Taylor path.
 2. **Split.** The step is taken as sub-steps of the paper's DS step: up to
    the instant (ended a small time ``late`` after it), where the velocity
    jump takes the closing contacts as candidates (whatever the sign of the
@@ -42,6 +46,8 @@ first failure, and reports the state at the step's end, the number of impacts re
 from __future__ import annotations
 
 import dataclasses
+import functools
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import equinox as eqx
@@ -117,31 +123,57 @@ def taylor_path(state: StepState, s: Scalar, acceleration: Vector | None = None)
     return state.q + s * state.v + 0.5 * s**2 * (state.vd if acceleration is None else acceleration)
 
 
+def hermite_path(state: StepState, end: tuple[Vector, Vector], span: Scalar) -> Callable[[Scalar], Vector]:
+    """The cubic Hermite interpolant p(s) [m] through (q, v) at s = 0 and the
+    smooth motion's end (q̃, ṽ) = ``end`` at s = ``span`` [s]: the scheme's
+    own motion over the step, where it departs from any short Taylor path
+    (a stiff member's discrete motion)."""
+    q1, v1 = end
+
+    def path(s: Scalar) -> Vector:
+        tau = s / span
+        h00, h10 = 1.0 - tau**2 * (3.0 - 2.0 * tau), tau * (1.0 - tau) ** 2
+        h01, h11 = tau**2 * (3.0 - 2.0 * tau), tau**2 * (tau - 1.0)
+        return h00 * state.q + h10 * span * state.v + h01 * q1 + h11 * span * v1
+
+    return path
+
+
+def open_contacts(model: Model, state: StepState) -> jax.Array:
+    """The unilateral contacts (nu,) bool open at ``state``: a gap above
+    :func:`open_floor` and not among ``state.closed`` (what the last step
+    closed stays closed: a resting contact)."""
+    g0 = model.unilateral(state.q)
+    is_open = g0 > open_floor(g0)
+    return is_open if state.closed is None else is_open & ~state.closed
+
+
 def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: float, h: Scalar,
-                  together: Scalar | float = 0.0, hold: bool = False) -> tuple[jax.Array, Scalar, jax.Array]:
-    """Whether a contact open at ``state`` (its gap above :func:`open_floor`,
-    and not among ``state.closed``) closes inside (0, span] along the
-    Taylor path, the earliest such instant s* [s] (relative to the state's
-    time), and the unilateral contacts (nu,) bool that close by s* + ``together`` [s].
+                  together: Scalar | float = 0.0, hold: bool = False,
+                  path: Callable[[Scalar], Vector] | None = None) -> tuple[jax.Array, Scalar, jax.Array]:
+    """Whether a contact open at ``state`` (:func:`open_contacts`) closes
+    inside (0, span] along ``path`` (by default the Taylor path), the
+    earliest such instant s* [s] (relative to the state's time), and the
+    unilateral contacts (nu,) bool that close by s* + ``together`` [s].
 
     Instants within ``min_fraction · h`` of 0 or of ``span`` are not
     reported (the paper's step is kept for them). ``hold`` (static): where
-    a contact is closed at the state and another is open, the path's
+    a contact is closed at the state and another is open, the Taylor path's
     acceleration is :func:`held_acceleration` (dense models), else v̇̃."""
     g0 = model.unilateral(state.q)
-    is_open = g0 > open_floor(g0)
-    if state.closed is not None:  # what the last step closed stays closed (a resting contact)
-        is_open = is_open & ~state.closed
-    acceleration = None
-    if hold and state.closed is not None:  # only where a contact is closed and another may close
-        acceleration = lax.cond(jnp.any(state.closed) & jnp.any(is_open), lambda: held_acceleration(model, state),
-                                lambda: state.vd)
-    g1 = model.unilateral(taylor_path(state, span, acceleration))
+    is_open = open_contacts(model, state)
+    if path is None:
+        acceleration = None
+        if hold and state.closed is not None:  # only where a contact is closed and another may close
+            acceleration = lax.cond(jnp.any(state.closed) & jnp.any(is_open),
+                                    lambda: held_acceleration(model, state), lambda: state.vd)
+        path = functools.partial(taylor_path, state, acceleration=acceleration)
+    g1 = model.unilateral(path(span))
     closing = is_open & (g1 < 0.0)
     s = span * g0 / jnp.where(closing, g0 - g1, 1.0)  # the secant estimate
 
     def gap_and_rate(s):
-        return jax.jvp(lambda x: model.unilateral(taylor_path(state, x, acceleration)), (s,), (jnp.ones_like(s),))
+        return jax.jvp(lambda x: model.unilateral(path(x)), (s,), (jnp.ones_like(s),))
 
     def newton(_, s):
         g, dg = jax.vmap(lambda j, sj: jax.tree.map(lambda a: a[j], gap_and_rate(sj)))(jnp.arange(g0.shape[0]), s)
@@ -235,29 +267,38 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     """One step of size h [s] with its impacts at their instants (module docstring).
 
     A step where no open contact closes is the paper's step with the run's
-    operators ``ops``; a split step prepares the operators of each sub-step's size."""
+    operators ``ops``; a split step prepares the operators of each sub-step's size.
+    A contact open at the start that the paper's step closes where the
+    Taylor path misses it is located on the smooth motion's own cubic
+    (:func:`hermite_path`)."""
     hold = not scheme.matrix_free(model)
-    found, _, _ = first_instant(model, state, h, scheme.min_fraction, h, hold=hold)
-
-    def paper(state):
-        return scheme.paper_step(model, ops, state, h)
+    nb = model.n_bilateral
+    # The paper's step is taken outside the cond (and wasted in the rare split
+    # step): measured, the worst case over four scenes is then 1.2x the option
+    # off, against 2.2x with it inside (docs/impact-instants.md, *Run time*).
+    new, taken, smooth_end = scheme.paper_step(model, ops, state, h)
+    located = first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h, hold)
+    closed_by_step = (taken.active_position | taken.active_velocity)[nb:] & open_contacts(model, state)
+    missed = ~located[0] & jnp.any(closed_by_step)
+    located = lax.cond(missed, lambda: first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h,
+                                                     path=hermite_path(state, smooth_end, h)), lambda: located)
 
     def split(state):
         t_end = state.t + h
 
-        def take(k, st, left, acc, impacts):
-            found, s, rows = first_instant(model, st, left, scheme.min_fraction, h, scheme.late * h, hold)
+        def take(k, st, left, acc, impacts, given=None):
+            found, s, rows = given or first_instant(model, st, left, scheme.min_fraction, h, scheme.late * h, hold)
             located = found & (k < scheme.max_impacts)
             size = jnp.where(located, s + scheme.late * h, left)  # s < left - min_fraction h < left - late h
-            closing = jnp.concatenate([jnp.zeros((model.n_bilateral,), bool), located & rows])
-            new, out = scheme.paper_step(model, scheme.prepare(model, size, st.t), st, size, closing)
+            closing = jnp.concatenate([jnp.zeros((nb,), bool), located & rows])
+            new, out, _ = scheme.paper_step(model, scheme.prepare(model, size, st.t), st, size, closing)
             new, out = lax.cond(located, lambda: _and_impact(scheme, model, new, out, closing), lambda: (new, out))
             new = restart_after_impact(scheme, model, with_closed(model, new, out), located)
             merged = out if acc is None else _merge(acc, out)
             return new, left - size, ~located, merged, impacts + located.astype(jnp.int32)
 
-        # the first sub-step: a closing contact was found over h, so it ends at its instant
-        carry = take(0, state, h, None, jnp.zeros((), jnp.int32))
+        # the first sub-step: a closing contact was located over h, so it ends at its instant
+        carry = take(0, state, h, None, jnp.zeros((), jnp.int32), located)
 
         def next_substep(k, carry):
             st, left, done, acc, impacts = carry
@@ -269,12 +310,8 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
                           (t_end, impacts, impacts >= scheme.max_impacts))
         return new, out
 
-    # The paper's step is taken outside the cond (and wasted in the rare split
-    # step): measured, the worst case over four scenes is then 1.2x the option
-    # off, against 2.2x with it inside (docs/impact-instants.md, *Run time*).
-    taken = paper(state)
-    taken = (with_closed(model, *taken), taken[1])
-    return lax.cond(found, split, lambda _: taken, state)
+    return lax.cond(located[0], split, lambda _: (with_closed(model, new, taken), taken), state)
 
 
-__all__ = ["restart_after_impact", "first_instant", "open_floor", "split_step", "taylor_path", "with_closed"]
+__all__ = ["first_instant", "hermite_path", "open_contacts", "open_floor", "restart_after_impact", "split_step",
+           "taylor_path", "with_closed"]
