@@ -164,6 +164,30 @@ def test_gradient_through_the_located_instant_is_the_exact_one():
     assert abs(float(paper["height"])) < 1e-9 and abs(float(paper["e"]) - de) > 1.0
 
 
+def test_event_adjoint_rebuilds_the_impacts_a_paper_step_takes_under_the_option():
+    """With ``min_fraction`` near 1/2 no instant of the ball's bounces falls in
+    the middle of its step, so every impact is the paper step's, taken
+    under the option: the run is the paper's run and the event adjoint
+    rebuilds each impact as it does without the option, to round-off."""
+    params, build = parametrize("bouncing_ball", {"e": 0.8}, names=["e", "height"])
+
+    def final_height(p, **options):
+        model, q0, v0, _ = build(p)
+        sol = nj.integrate(model, nj.DS(rho_inf=1.0, **options), 0.0, 1.2, 1e-3, q0, v0,
+                           saveat=nj.SaveAt(fn=lambda state, record: (state.q[0], record.instants)),
+                           adjoint=nj.ImpactTimeAdjoint())
+        return sol.records[0][-1], sol.records[1]
+
+    paper = jax.jit(jax.grad(lambda p: final_height(p)[0]))(params)
+    option = dict(impact_instants=True, min_fraction=0.4999)
+    located = jax.jit(lambda p: final_height(p, **option)[1])(params)
+    assert int(np.sum(located)) == 0  # no impact located: each is the paper step's
+    grad = jax.jit(jax.grad(lambda p: final_height(p, **option)[0]))(params)
+    for name in ("e", "height"):
+        assert abs(float(paper[name])) > 0.1
+        assert float(grad[name]) == pytest.approx(float(paper[name]), rel=1e-10, abs=1e-12)
+
+
 def test_float32_elastic_ball():
     ball = _ball(1.0)
     sol = nj.simulate(ball.model, nj.DS(rho_inf=1.0, impact_instants=True), 0.0, 5.0, 1e-3, ball.q0, ball.v0,
