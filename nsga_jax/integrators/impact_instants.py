@@ -139,13 +139,13 @@ def hermite_path(state: StepState, end: tuple[Vector, Vector], span: Scalar) -> 
     return path
 
 
-def open_contacts(model: Model, state: StepState) -> jax.Array:
-    """The unilateral contacts (nu,) bool open at ``state``: a gap above
-    :func:`open_floor` and not among ``state.closed`` (what the last step
-    closed stays closed: a resting contact)."""
-    g0 = model.unilateral(state.q)
-    is_open = g0 > open_floor(g0)
-    return is_open if state.closed is None else is_open & ~state.closed
+def open_contacts(gaps: jax.Array, closed: jax.Array | None) -> jax.Array:
+    """The unilateral contacts (nu,) bool open at a state with ``gaps`` (nu,)
+    [m]: a gap above :func:`open_floor` and not among ``closed``
+    (``StepState.closed``: what the last step closed stays closed, a resting
+    contact)."""
+    is_open = gaps > open_floor(gaps)
+    return is_open if closed is None else is_open & ~closed
 
 
 def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: float, h: Scalar,
@@ -161,7 +161,7 @@ def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: fl
     a contact is closed at the state and another is open, the Taylor path's
     acceleration is :func:`held_acceleration` (dense models), else v̇̃."""
     g0 = model.unilateral(state.q)
-    is_open = open_contacts(model, state)
+    is_open = open_contacts(g0, state.closed)
     if path is None:
         acceleration = None
         if hold and state.closed is not None:  # only where a contact is closed and another may close
@@ -278,7 +278,8 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     # off, against 2.2x with it inside (docs/impact-instants.md, *Run time*).
     new, taken, smooth_end = scheme.paper_step(model, ops, state, h)
     located = first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h, hold)
-    closed_by_step = (taken.active_position | taken.active_velocity)[nb:] & open_contacts(model, state)
+    closed_by_step = (taken.active_position | taken.active_velocity)[nb:] & open_contacts(
+        model.unilateral(state.q), state.closed)
     missed = ~located[0] & jnp.any(closed_by_step)
     located = lax.cond(missed, lambda: first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h,
                                                      path=hermite_path(state, smooth_end, h)), lambda: located)
@@ -287,7 +288,8 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
         t_end = state.t + h
 
         def take(k, st, left, acc, impacts, given=None):
-            found, s, rows = given or first_instant(model, st, left, scheme.min_fraction, h, scheme.late * h, hold)
+            found, s, rows = given if given is not None else first_instant(model, st, left, scheme.min_fraction, h,
+                                                                           scheme.late * h, hold)
             located = found & (k < scheme.max_impacts)
             size = jnp.where(located, s + scheme.late * h, left)  # s < left - min_fraction h < left - late h
             closing = jnp.concatenate([jnp.zeros((nb,), bool), located & rows])
