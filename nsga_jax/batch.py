@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Hashable, Iterator, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -156,6 +157,30 @@ def _prepare_members(*members):
 
 _members_constraints = eqx.filter_jit(jax.vmap(constraints_at))  # every member's at q0 in one call
 
+_EXECUTABLES: dict[Hashable, tuple[Any, Callable]] = {}
+"""Compiled batch programs by (program, bounded LAPACK, the arguments' tree,
+shapes, dtypes, shardings and static values): the batches of a sweep that
+share a structure compile once per process, not once per batch."""
+
+
+def _compile(fn: Any, args: tuple, bounded: bool) -> Callable:
+    """``fn`` (an ``eqx.filter_jit``) compiled for ``args``, once per signature."""
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    key: Hashable = (id(fn), bounded, treedef,
+           tuple((x.shape, x.dtype, getattr(x, "weak_type", False), getattr(x, "sharding", None))
+                 if eqx.is_array(x) else x for x in leaves))
+    try:
+        hit = _EXECUTABLES.get(key)
+    except (TypeError, ValueError):  # an unhashable or array-valued static leaf: compile every time
+        key, hit = None, None
+    if hit is not None and hit[0] is fn:
+        return hit[1]
+    with bounded_lapack_batches(bounded):
+        compiled = fn.lower(*args).compile()
+    if key is not None:
+        _EXECUTABLES[key] = (fn, compiled)
+    return compiled
+
 
 def _place(tree, mesh: Mesh | None):
     """Array leaves as global arrays split over the mesh's member axis (each
@@ -206,8 +231,7 @@ class BatchRun:
         args = _place((model, schemes, t0s, np.asarray(q0), np.asarray(v0), np.asarray(hs)), mesh)
         bounded = needs_bounded_lapack_batches(mesh)
         tc = time.perf_counter()
-        with bounded_lapack_batches(bounded):
-            prepare = prepare.lower(*args).compile()
+        prepare = _compile(prepare, args, bounded)
         self.compile_time = time.perf_counter() - tc
         tw = time.perf_counter()
         self._ops, self._carry = prepare(*args)
@@ -223,8 +247,7 @@ class BatchRun:
         self._mesh = mesh
         dtype = self._carry.q.dtype
         tc = time.perf_counter()
-        with bounded_lapack_batches(bounded):
-            self._run = self._run.lower(*self._args, self._ops, self._carry, *self._chunk_args(dtype)).compile()
+        self._run = _compile(self._run, (*self._args, self._ops, self._carry, *self._chunk_args(dtype)), bounded)
         self.compile_time += time.perf_counter() - tc
 
     def _chunk_args(self, dtype):

@@ -34,7 +34,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from .batch import BatchRun, member_mesh, member_solution, same_structure, stack_models
+from .batch import BatchRun, member_mesh, member_solution
 from .distributed import agree
 from .first_step import LIMIT_SECONDS
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
@@ -43,7 +43,9 @@ from .monitors import RunTotals
 from .precision import cast_floats
 from .results import ConfigError
 from .scenes import configure
+from .scenes.spec import make_scheme
 from .solution import Solution, float64_view
+from .sweep_build import build_batch, split_batches, traced_structure
 from .sweep_checks import check_batches
 from .tables import read_csv, write_csv
 from .validation import step_count
@@ -99,34 +101,20 @@ class SweepResult:
 # -------------------------------------------------------------------- runs
 
 
-def split_batches(mems: list[Member], batch_size: int) -> list[list[Member]]:
-    """The members in batches of at most ``batch_size``, in grid order, a new
-    batch wherever a member's model differs in structure from the one before
-    (a contact with friction and one without, an element count): each batch
-    is one compilation."""
-    runs: list[list[Member]] = []
-    for m in mems:
-        if runs and same_structure(m.scene.model, runs[-1][-1].scene.model):
-            runs[-1].append(m)
-        else:
-            runs.append([m])
-    return [run[i:i + batch_size] for run in runs for i in range(0, len(run), batch_size)]
-
-
-def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tuple[list[dict], float, float]:
+def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int,
+                structural: tuple[str, ...] | None) -> tuple[list[dict], float, float]:
     """Run one batch of members (padded with copies of the last one to
     ``padded`` members) and summarise each real member in a row."""
-    scenes = [m.scene for m in batch] + [batch[-1].scene] * (padded - len(batch))
-    first = scenes[0]
+    configs = [m.configured for m in batch] + [batch[-1].configured] * (padded - len(batch))
+    first = configs[0]
     t_end = first.solver["t_end"]
-    hs = np.asarray([s.solver["h"] for s in scenes])
+    hs = np.asarray([c.solver["h"] for c in configs])
     n_steps = np.asarray([step_count(0.0, t_end, h) for h in hs])
     every = np.maximum(1, -(-n_steps // max_records))  # per member: at most max_records kept
     dtype = first.solver["dtype"]
-    model = stack_models([s.model for s in scenes])
-    model, scheme = cast_floats((model, first.scheme()), dtype)
-    q0 = np.stack([s.q0 for s in scenes]).astype(dtype)
-    v0 = np.stack([s.v0 for s in scenes]).astype(dtype)
+    built = build_batch(batch + [batch[-1]] * (padded - len(batch)), structural)
+    model, scheme = cast_floats((built.model, make_scheme(first.solver)), dtype)
+    q0, v0 = built.q0.astype(dtype), built.v0.astype(dtype)
     run = BatchRun(model, scheme, 0.0, q0, v0, hs.astype(dtype), n_steps, mesh=mesh)
     totals = [RunTotals() for _ in batch]  # every step's statistics, whatever the records keep
     kept, masks = [], []
@@ -142,18 +130,19 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int) -> tup
         start += done.shape[1]
     records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept)
     mask = np.concatenate(masks, axis=1)
-    rows = []
-    for b, member in enumerate(batch):
-        scene = member.scene
-        mine = jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)
-        sol = member_solution(scene.model, [mine], 0.0, scene.q0.astype(dtype), scene.v0.astype(dtype),
-                              float(hs[b]), int(n_steps[b]), run, b, totals=totals[b])
-        rows.append(_row(member, sol))
+    sols = [float64_view(member_solution(model, [jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)], 0.0,
+                                         q0[b], v0[b], float(hs[b]), int(n_steps[b]), run, b, totals=totals[b]))
+            for b in range(len(batch))]
+    observed = built.observables(sols)
+    rows = [_row(member, sol, obs, exact) for member, sol, obs, exact in zip(batch, sols, observed, built.exact)]
     return rows, run.compile_time, run.wall_time
 
 
-def _row(member: Member, sol: Solution) -> dict[str, Any]:
-    scene = member.scene
+def _row(member: Member, sol: Solution, obs: dict[str, np.ndarray], exact) -> dict[str, Any]:
+    """A member's row: its values, what the scheme did (``sol``, float64),
+    its observables' (``obs``) final, smallest and largest values, and their
+    errors against ``exact``."""
+    config = member.configured
     st = sol.stats
     row: dict[str, Any] = {"member": member.index, **member.values}
     row.update({
@@ -164,19 +153,17 @@ def _row(member: Member, sol: Solution) -> dict[str, Any]:
         "max_bilateral_violation": st["max_bilateral_violation_position"],
         "max_bilateral_rate_violation": st["max_bilateral_violation_velocity"],
     })
-    if scene.solver.get("impacts", "end") == "instants":  # what the located impacts did
+    if config.solver.get("impacts", "end") == "instants":  # what the located impacts did
         row.update({"impacts_at_instants": st["impacts_at_instants"], "instant_fallbacks": st["instant_fallbacks"]})
-    view = float64_view(sol)
-    obs = {k: np.asarray(v) for k, v in scene.observables(view).items()}
     for name, y in obs.items():
         if y.ndim != 1:
             continue
         row[f"{name}_final"], row[f"{name}_min"], row[f"{name}_max"] = float(y[-1]), float(y.min()), float(y.max())
-    if scene.exact is not None:
-        exact = scene.exact(view.ts)
-        for name in scene.spec.error_observables:
-            if name in exact and name in obs:
-                row[f"error_{name}"], row[f"abs_error_{name}"] = l1_errors(obs[name], exact[name])
+    if exact is not None:
+        reference = exact(sol.ts)
+        for name in config.spec.error_observables:
+            if name in reference and name in obs:
+                row[f"error_{name}"], row[f"abs_error_{name}"] = l1_errors(obs[name], reference[name])
     return row
 
 
@@ -238,7 +225,8 @@ def sweep(
         raise ConfigError(f"batch_size must be an integer >= 1, got {batch_size!r}")
     batch_size = min(int(batch_size), len(mems))
     padded = -(-batch_size // n_dev) * n_dev
-    batches = split_batches(mems, batch_size)
+    structural = traced_structure(mems)
+    batches = split_batches(mems, batch_size, structural)
     n_batches = len(batches)
     per_device = padded if devices[0].platform == "cpu" else padded // n_dev  # host devices share one memory
     notes = check_batches(batches, per_device, first_step_limit)  # before any batch is compiled
@@ -255,7 +243,7 @@ def sweep(
             assert path is not None  # every process gives the same out
             rows = _read_batch(path, batch) if path.exists() else []
         else:
-            rows, compile_time, wall = _batch_rows(batch, padded, mesh, max_records)
+            rows, compile_time, wall = _batch_rows(batch, padded, mesh, max_records, structural)
             result.compile_time += compile_time
             result.wall_time += wall
             for r in rows:

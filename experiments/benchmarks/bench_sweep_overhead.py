@@ -38,8 +38,9 @@ GRIDS = {
 }
 PHASES = {  # name in the table: the profiled function (file suffix, function name)
     "validate members (grid.members)": ("grid.py", "members"),
-    "build members' models": ("scenes/spec.py", "build"),
-    "group by structure (split_batches)": ("sweep.py", "split_batches"),
+    "build members' models one by one": ("scenes/spec.py", "build"),
+    "group by structure (split_batches)": ("sweep_build.py", "split_batches"),
+    "build the batches' models (build_batch)": ("sweep_build.py", "build_batch"),
     "stack models": ("batch.py", "stack_models"),
     "batches incl. compile (BatchRun)": ("batch.py", "__init__"),
     "rows (member_solution + _row)": ("sweep.py", "_row"),
