@@ -1,5 +1,6 @@
 """Accuracy measures: the paper's eq. 52 error, observed orders of
-convergence, and the effective restitution of a run's first impact."""
+convergence, the effective restitution of a run's first impact, and the
+energy kept through a run's impacts."""
 
 from __future__ import annotations
 
@@ -94,3 +95,21 @@ def first_rebound(model: Model, sol: Solution) -> Rebound:
     rate_before, rate_after = (float(np.polyval(np.polyfit(t[side], rates[side, i], 3), instant))
                                for side in (before, after))
     return Rebound(i, instant, rate_before, rate_after)
+
+
+def energy_through_impacts(ts, energy, impacts, delay: float = 1e-3, span: float = 1e-3) -> float:
+    """The relative energy change through a run's impacts: the mean of
+    ``energy`` [J] over the ``span`` [s] that starts ``delay`` [s] after the
+    last step with an impact, over its first value, less 1. A mean, not a
+    value: a flexible body set vibrating by the impacts trades kinetic and
+    strain energy faster than the steps resolve (the slider-crank's rod).
+
+    ``ts`` (rows,) [s], ``energy`` (rows,) [J], ``impacts`` (rows,) bool: the
+    steps with an impulse. ``nan`` where there is no impact or no row in the
+    span."""
+    ts, energy, impacts = np.asarray(ts), np.asarray(energy), np.asarray(impacts, bool)
+    if not impacts.any():
+        return float("nan")
+    last = ts[impacts][-1]
+    after = (ts > last + delay) & (ts <= last + delay + span)
+    return float(energy[after].mean() / energy[0] - 1.0) if after.any() else float("nan")

@@ -57,7 +57,7 @@ configure_jax()
 
 import nsga_jax as nj  # noqa: E402
 from nsga_jax.exact import bouncing_ball, newtons_cradle, rocking_impact_times  # noqa: E402
-from nsga_jax.metrics import first_rebound  # noqa: E402
+from nsga_jax.metrics import energy_through_impacts, first_rebound  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[2] / "docs" / "results" / "impact_instants"
@@ -141,9 +141,7 @@ def slider_crank(sol, scene):
     at_stop = np.asarray(sol.records.impulse)[:, -1] != 0.0
     if not at_stop.any() or not np.isfinite(change):
         return math.nan, {"energy change": change}
-    ts, last = np.asarray(sol.ts), np.asarray(sol.ts)[at_stop][-1]
-    after = (ts > last + 1e-3) & (ts <= last + 2e-3)  # a mean over 1 ms: the rod vibrates
-    through = float(energy[after].mean() / energy[0] - 1.0)
+    through = energy_through_impacts(sol.ts, energy, at_stop)  # a mean over 1 ms: the rod vibrates
     return abs(through), {"energy change": change, "through impacts": through}
 
 
