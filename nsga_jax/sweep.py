@@ -123,15 +123,22 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int,
         step = start + 1 + np.arange(done.shape[1])
         keep = done & ((step[None, :] % every[:, None] == 0) | (step[None, :] == n_steps[:, None]))
         cols = keep.any(axis=0)
-        kept.append(jax.tree_util.tree_map(lambda x: x[:, cols], out))
+        kept.append(out if cols.all() else jax.tree_util.tree_map(lambda x: x[:, cols], out))
         masks.append(keep[:, cols])
-        for b, member_totals in enumerate(totals):  # a member's steps are a prefix of the chunk
-            member_totals.add(jax.tree_util.tree_map(lambda x: x[b][done[b]], out), first_step=start + 1)
+        for b, member_totals in enumerate(totals):  # a member's steps are a prefix of the chunk: a view
+            n = int(done[b].sum())
+            member_totals.add(jax.tree_util.tree_map(lambda x: x[b, :n], out), first_step=start + 1)
         start += done.shape[1]
-    records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept)
+    records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept) if len(kept) > 1 else kept[0]
     mask = np.concatenate(masks, axis=1)
-    sols = [float64_view(member_solution(model, [jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)], 0.0,
-                                         q0[b], v0[b], float(hs[b]), int(n_steps[b]), run, b, totals=totals[b]))
+
+    def rows_of(b: int):
+        """Member b's kept records (a view where it keeps every column)."""
+        every_column = bool(mask[b].all())
+        return jax.tree_util.tree_map(lambda x: x[b] if every_column else x[b][mask[b]], records)
+
+    sols = [float64_view(member_solution(model, [rows_of(b)], 0.0, q0[b], v0[b], float(hs[b]), int(n_steps[b]), run,
+                                         b, totals=totals[b]))
             for b in range(len(batch))]
     observed = built.observables(sols)
     rows = [_row(member, sol, obs, exact) for member, sol, obs, exact in zip(batch, sols, observed, built.exact)]
