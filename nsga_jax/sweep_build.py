@@ -197,14 +197,14 @@ def _bare(sol: Solution) -> Solution:
 
 def build_batch(batch: list[Member], structural: tuple[str, ...] | None) -> BatchModels:
     """The models of ``batch`` (members of one structure, see
-    :func:`split_batches`): from one compiled call where the scene can be
-    traced (``structural``: the floats it reads as structure, which every
-    member must share), else member by member."""
+    :func:`split_batches`): from one compiled call where the sweep can be
+    traced (``structural``, from :func:`traced_structure`: the floats the
+    scene reads as structure, which no member varies), else member by
+    member."""
     first = batch[0].configured
     spec = first.spec
     exact = [spec.exact(m.configured.parameters) if spec.exact is not None else None for m in batch]
-    if structural is None or any(m.configured.parameters[k] != first.parameters[k] for m in batch for k in structural):
-        # (stack_models names a difference in structure)
+    if structural is None:
         scenes = [m.scene for m in batch]
         return BatchModels(stack_models([s.model for s in scenes]), np.stack([s.q0 for s in scenes]),
                            np.stack([s.v0 for s in scenes]),

@@ -3,6 +3,8 @@ scene's ``make``, models equal to member-by-member builds for every built-in
 scene, rows equal to single runs both ways, and the fall-back for a scene
 that cannot be traced or a sweep over a float read as structure."""
 
+from pathlib import Path
+
 import jax
 import numpy as np
 import pytest
@@ -16,6 +18,8 @@ from nsga_jax.scenes.spec import SceneSpec
 from nsga_jax.sweep import sweep
 from nsga_jax.sweep_build import build_batch, structural_floats, traced_structure
 
+ROOT = Path(__file__).resolve().parents[1]
+
 
 def test_structural_floats_are_read_from_make():
     bar = configure("impacting_bar")
@@ -26,7 +30,7 @@ def test_structural_floats_are_read_from_make():
     assert traced_structure(members("bouncing_ball", {"mu": [0.0, 0.5]}, None, None)) is None
 
 
-def test_a_make_that_branches_on_a_float_is_built_member_by_member():
+def test_a_make_that_branches_on_a_float_cannot_be_traced():
     def make(p, concrete):
         if p["k"] > 1.0:  # a Python branch on a swept value: not traceable
             raise AssertionError("never reached with k = 1")
@@ -100,3 +104,20 @@ def test_the_batches_of_one_structure_compile_once():
     res = sweep("bouncing_ball", {"e": [0.5, 0.7, 0.9]}, overrides={"t_end": 0.05, "height": 0.37}, batch_size=1)
     assert sorted({r["batch"] for r in res.rows}) == [0, 1, 2]
     assert len(batch._EXECUTABLES) - before <= 2
+
+
+def test_system_file_sweep_is_traced_and_equals_single_runs():
+    """A system file's scene (the sliding block with friction) is built
+    traced; its rows equal single runs."""
+    path = str(ROOT / "nsga_jax" / "configs" / "systems" / "sliding_block.toml")
+    grid = {"bodies.block.mass": [1.0, 1.1], "bodies.block.velocity.0": [2.0, 1.5]}
+    settings = {"t_end": 0.2}
+    assert traced_structure(members(path, grid, None, settings)) == ()
+    res = sweep(path, grid, overrides=settings)
+    assert len(res.rows) == 4
+    for row in res.rows:
+        sol = load_scene(path, {**settings, **{k: row[k] for k in grid}}).run()
+        assert row["n_steps"] == sol.n_steps and row["result"] == "successful"
+        for name, y in sol.observables.items():
+            if y.ndim == 1:
+                assert row[f"{name}_final"] == pytest.approx(y[-1], rel=1e-9, abs=1e-12), name
