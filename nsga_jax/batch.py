@@ -275,16 +275,36 @@ class BatchRun:
             yield unpack_outputs(floats, ints, self._template), done
 
 
+def joined_records(chunks: list[StepOutput], t0: float, q0: np.ndarray, v0: np.ndarray,
+                   run: BatchRun) -> StepOutput:
+    """Every member's (NumPy) records of ``chunks`` (each leaf (B, steps,
+    ...)) after its initial row (t0, q0 (B, n), v0 (B, n) and the gaps and
+    bilateral values the batch computed there): leaves (B, 1 + steps, ...),
+    joined in one copy, for members that keep the same steps."""
+    gap, bilateral = run.initial_constraints
+    first = chunks[0]
+    init = jax.tree_util.tree_map(lambda x: np.zeros((x.shape[0], 1) + x.shape[2:], x.dtype), first)
+    init = eqx.tree_at(lambda r: (r.t, r.q, r.v, r.gap, r.bilateral), init,
+                       (np.full((len(q0), 1), float(t0)), q0[:, None], v0[:, None], np.asarray(gap)[:, None],
+                        np.asarray(bilateral)[:, None]))
+    return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), init, *chunks)
+
+
 def member_solution(model: Model, chunks: list[StepOutput], t0, q0, v0, h: float, n_steps_requested: int,
                     run: BatchRun, index: int, totals: RunTotals | None = None,
-                    warnings: list[str] | None = None) -> Solution:
+                    warnings: list[str] | None = None, joined: StepOutput | None = None) -> Solution:
     """Member ``index``'s :class:`Solution` from its (NumPy) records. Without
     ``totals`` the records hold every step and give the statistics and the
     first failure; with them (records strided) those come from ``totals``.
     ``warnings``: notes of the run kept in ``Solution.warnings`` (the
-    redundancy of its constraints)."""
-    initial = tuple(x[index] for x in run.initial_constraints)
-    records = prepend_initial(model, chunks, t0, q0, v0, constraints=initial)
+    redundancy of its constraints). ``joined``: the batch's records from
+    :func:`joined_records`, of which the member's are a view (``chunks``,
+    ``t0``, ``q0`` and ``v0`` are then not read)."""
+    if joined is not None:
+        records = jax.tree_util.tree_map(lambda x: x[index], joined)
+    else:
+        initial = tuple(x[index] for x in run.initial_constraints)
+        records = prepend_initial(model, chunks, t0, q0, v0, constraints=initial)
     if totals is None:
         bad = np.nonzero(np.asarray(records.result) != Result.successful)[0]
         result = Result(int(records.result[bad[0]])) if bad.size else Result.successful

@@ -22,6 +22,7 @@ eq. 52 error of its observables (on the recorded steps, at most
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import sys
@@ -34,7 +35,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from .batch import BatchRun, member_mesh, member_solution
+from .batch import BatchRun, joined_records, member_mesh, member_solution
 from .distributed import agree
 from .first_step import LIMIT_SECONDS
 from .grid import MAX_MEMBERS, Member, members, parse_grid, parse_values  # noqa: F401  (the sweep's grid)
@@ -123,26 +124,37 @@ def _batch_rows(batch: list[Member], padded: int, mesh, max_records: int,
         step = start + 1 + np.arange(done.shape[1])
         keep = done & ((step[None, :] % every[:, None] == 0) | (step[None, :] == n_steps[:, None]))
         cols = keep.any(axis=0)
-        kept.append(out if cols.all() else jax.tree_util.tree_map(lambda x: x[:, cols], out))
+        kept.append(out if cols.all() else jax.tree_util.tree_map(lambda x: x[:, _columns(cols)], out))
         masks.append(keep[:, cols])
         for b, member_totals in enumerate(totals):  # a member's steps are a prefix of the chunk: a view
             n = int(done[b].sum())
             member_totals.add(jax.tree_util.tree_map(lambda x: x[b, :n], out), first_step=start + 1)
         start += done.shape[1]
-    records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept) if len(kept) > 1 else kept[0]
     mask = np.concatenate(masks, axis=1)
-
-    def rows_of(b: int):
-        """Member b's kept records (a view where it keeps every column)."""
-        every_column = bool(mask[b].all())
-        return jax.tree_util.tree_map(lambda x: x[b] if every_column else x[b][mask[b]], records)
-
-    sols = [float64_view(member_solution(model, [rows_of(b)], 0.0, q0[b], v0[b], float(hs[b]), int(n_steps[b]), run,
-                                         b, totals=totals[b]))
-            for b in range(len(batch))]
-    observed = built.observables(sols)
+    stacked = None
+    if mask[:len(batch)].all():  # every member keeps every column: one copy, each member's records a view of it
+        joined = joined_records(kept, 0.0, q0, v0, run)
+        sols = [float64_view(member_solution(model, [], 0.0, q0[b], v0[b], float(hs[b]), int(n_steps[b]), run, b,
+                                             totals=totals[b], joined=joined))
+                for b in range(len(batch))]
+        real = jax.tree_util.tree_map(lambda x: x[:len(batch)], joined)
+        stacked = float64_view(dataclasses.replace(sols[0], ts=real.t, q=real.q, v=real.v, records=real,
+                                                   h=hs[:len(batch)].astype(np.float64)))
+    else:
+        records = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *kept) if len(kept) > 1 else kept[0]
+        sols = [float64_view(member_solution(model, [jax.tree_util.tree_map(lambda x: x[b][mask[b]], records)], 0.0,
+                                             q0[b], v0[b], float(hs[b]), int(n_steps[b]), run, b, totals=totals[b]))
+                for b in range(len(batch))]
+    observed = built.observables(sols, stacked)
     rows = [_row(member, sol, obs, exact) for member, sol, obs, exact in zip(batch, sols, observed, built.exact)]
     return rows, run.compile_time, run.wall_time
+
+
+def _columns(cols: np.ndarray) -> slice | np.ndarray:
+    """Index of the kept columns ``cols`` (bool): a slice (a view) where they
+    are a prefix, as in a batch's last chunk."""
+    k = int(cols.sum())
+    return slice(0, k) if cols[:k].all() else cols
 
 
 def _row(member: Member, sol: Solution, obs: dict[str, np.ndarray], exact) -> dict[str, Any]:

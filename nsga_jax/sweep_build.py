@@ -35,7 +35,7 @@ from .models.base import Model
 from .scenes.spec import SceneSpec
 from .solution import Solution
 
-ObservablesOf = Callable[[list[Solution]], list[dict[str, np.ndarray]]]
+ObservablesOf = Callable[[list[Solution], Solution | None], list[dict[str, np.ndarray]]]
 """The batch's members' float64 Solutions (in batch order) -> each one's ``{name: (rows,)}``."""
 
 
@@ -175,9 +175,15 @@ class _Observer:
         self.read = [id(v) in taken for v in closed.jaxpr.invars[len(jax.tree_util.tree_leaves(p)):]]
         self.call = jax.jit(jax.vmap(one))
 
-    def __call__(self, p: dict[str, np.ndarray], sols: list[Solution]) -> dict[str, np.ndarray]:
-        columns = [jax.tree_util.tree_leaves(eqx.filter(s, eqx.is_array)) for s in sols]
-        read = [np.stack([c[i] for c in columns]) for i, r in enumerate(self.read) if r]
+    def __call__(self, p: dict[str, np.ndarray], sols: list[Solution] | Solution) -> dict[str, np.ndarray]:
+        """The observables of the members ``sols``, or of the members stacked
+        in one Solution (each leaf with a leading member axis)."""
+        if isinstance(sols, Solution):
+            leaves = jax.tree_util.tree_leaves(eqx.filter(sols, eqx.is_array))
+            read = [x for x, r in zip(leaves, self.read) if r]
+        else:
+            columns = [jax.tree_util.tree_leaves(eqx.filter(s, eqx.is_array)) for s in sols]
+            read = [np.stack([c[i] for c in columns]) for i, r in enumerate(self.read) if r]
         return jax.device_get(self.call(p, *read))
 
 
@@ -206,17 +212,21 @@ def build_batch(batch: list[Member], structural: tuple[str, ...] | None) -> Batc
     exact = [spec.exact(m.configured.parameters) if spec.exact is not None else None for m in batch]
     if structural is None:
         scenes = [m.scene for m in batch]
+
+        def each(sols: list[Solution], stacked: Solution | None = None) -> list[dict[str, np.ndarray]]:
+            """Member by member (``stacked`` is not read)."""
+            return [{k: np.asarray(v) for k, v in scenes[b].observables(sol).items()} for b, sol in enumerate(sols)]
+
         return BatchModels(stack_models([s.model for s in scenes]), np.stack([s.q0 for s in scenes]),
-                           np.stack([s.v0 for s in scenes]),
-                           lambda sols: [{k: np.asarray(v) for k, v in scenes[b].observables(sol).items()}
-                                         for b, sol in enumerate(sols)], exact)
+                           np.stack([s.v0 for s in scenes]), each, exact)
     build, observables, observers = _compiled(spec, first.parameters, structural)
     p = {k: np.asarray([m.configured.parameters[k] for m in batch], dtype=np.float64) for k in _floats(spec)}
     model, q0, v0 = build(p)
 
-    def observables_of(sols: list[Solution]) -> list[dict[str, np.ndarray]]:
+    def observables_of(sols: list[Solution], stacked: Solution | None = None) -> list[dict[str, np.ndarray]]:
         """One compiled, vmapped call per group of members of one layout
-        (as many rows)."""
+        (as many rows); ``stacked``: the members' records already stacked
+        (every member keeps the same steps), read as they are."""
         bare = [_bare(sol) for sol in sols]
         layouts: dict[Hashable, list[int]] = {}
         for b, sol in enumerate(bare):
@@ -227,7 +237,8 @@ def build_batch(batch: list[Member], structural: tuple[str, ...] | None) -> Batc
             if observer is None:
                 observer = observers[signature] = _Observer(observables, {k: x[0] for k, x in p.items()},
                                                             bare[group[0]])
-            values = observer({k: x[group] for k, x in p.items()}, [bare[b] for b in group])
+            members = _bare(stacked) if stacked is not None and len(layouts) == 1 else [bare[b] for b in group]
+            values = observer({k: x[group] for k, x in p.items()}, members)
             for j, b in enumerate(group):
                 out[b] = {k: np.asarray(v[j]) for k, v in values.items()}
         return out
