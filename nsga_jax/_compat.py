@@ -12,6 +12,8 @@ equinox is checked here and nowhere else.
   comparison): :func:`same_treedef`.
 - **equinox's enumeration metaclass**, used to extend
   ``optimistix.RESULTS`` with nsga_jax's failures: :func:`extend_enumeration`.
+- **XLA's slow CPU reduction** of element terms taken from shifted slices
+  (a chain's neighbouring nodes): :func:`dot_sum`.
 - **jaxlib 0.10's LAPACK deadlock** on several CPU devices:
   :func:`bounded_lapack_batches` and :func:`lapack_batches_bounded`.
 
@@ -28,11 +30,22 @@ from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
 import jax
+import jax.numpy as jnp
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 
 # ------------------------------------------------------------ JAX's options and experimental APIs
+
+
+def dot_sum(x: jax.Array) -> jax.Array:
+    """The sum of every entry of ``x``, as a dot product with ones. Where the
+    entries are products of shifted slices (a chain's element energies,
+    under ``vmap``) XLA's CPU reduction runs several times slower than this
+    dot (``experiments/benchmarks/bench_energy.py``; docs/performance.md,
+    *Sweeps*)."""
+    flat = jnp.reshape(x, (-1,))
+    return flat @ jnp.ones_like(flat)
 
 
 def jax_option(name: str) -> Any:

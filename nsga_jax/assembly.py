@@ -27,7 +27,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._custom_types import Matrix, Vector
+from ._compat import dot_sum
+from ._custom_types import Matrix, Scalar, Vector
 
 ElementForce = Callable[[jax.Array, jax.Array, Any], jax.Array]
 """``f_e = element_force(x_e, v_e, params_e)``: element coordinates and
@@ -115,6 +116,22 @@ class ElementGroup(eqx.Module):
         """Assembled ``sum_e fn(params_e) @ x_e`` without forming the global matrix."""
         ye = jax.vmap(lambda p, xe: fn(p) @ xe)(self.params, self.gather(x))
         return scatter_vector(self.dofs, ye, x.shape[0])
+
+    def quadratic_form(self, fn: Callable[[Any], jax.Array], x: Vector) -> Scalar:
+        """``Σ_e x_eᵀ fn(params_e) x_e`` (``xᵀ A x`` of the assembled matrix A;
+        twice the kinetic energy for the mass), never assembled: for a chain of
+        2-node elements, element by element from its nodes read by slices;
+        otherwise ``x · (A x)`` by the element products."""
+        chain = chain_layout(self.dofs)
+        if chain is None:  # measured faster than element by element (experiments/benchmarks/bench_energy.py)
+            return x @ self.matrix_product(fn, x)
+        blocks = self.matrix_blocks(fn)  # (n_elements, k, k)
+        offset, s = chain
+        nodes = x[offset:offset + (self.n_elements + 1) * s].reshape(-1, s).T  # (s, n_nodes)
+        xe = [nodes[i, :-1] for i in range(s)] + [nodes[i, 1:] for i in range(s)]  # k rows (n_elements,)
+        a = jnp.moveaxis(blocks, 0, -1)  # (k, k, n_elements)
+        terms = [a[i, j] * xe[i] * xe[j] for i in range(2 * s) for j in range(2 * s)]
+        return dot_sum(functools.reduce(jnp.add, terms))
 
     def matrix(self, fn: Callable[[Any], jax.Array], n: int) -> Matrix:
         """Assembled element matrices ``fn(params_e)`` (e.g. mass), shape (n, n)."""

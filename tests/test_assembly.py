@@ -85,3 +85,25 @@ def test_chain_matrix_assembly_equals_the_scatter_add(offset, s, n_el, tail):
     expected = np.zeros((n, n))
     np.add.at(expected, (dofs[:, :, None], dofs[:, None, :]), me)
     np.testing.assert_array_equal(jax.jit(scatter_matrix, static_argnums=(0, 2))(index, jnp.asarray(me), n), expected)
+
+
+@pytest.mark.parametrize("offset, s, n_el, tail",
+                         [(0, 1, 7, 0), (0, 3, 4, 0), (2, 2, 3, 3), (0, 2, 1, 0), (None, 2, 3, 0)])
+def test_quadratic_form_equals_that_of_the_assembled_matrix(offset, s, n_el, tail):
+    """Σ_e x_eᵀ A_e x_e, read by slices for a chain (``offset``) and by a
+    gather otherwise (``None``: elements in a scattered order), is xᵀ A x of
+    the assembled A, also under vmap."""
+    from nsga_jax.assembly import ElementGroup, StaticIndex, chain_layout, scatter_matrix
+
+    rng = np.random.default_rng(s + n_el)
+    if offset is None:
+        dofs = rng.permutation(2 * s * n_el).reshape(n_el, 2 * s)
+    else:
+        dofs = offset + s * np.arange(n_el)[:, None] + np.arange(2 * s)[None, :]
+    n = int(dofs.max()) + 1 + tail
+    group = ElementGroup(dofs=StaticIndex(dofs), params=jnp.asarray(rng.normal(size=(n_el, 2 * s, 2 * s))))
+    assert (chain_layout(group.dofs) is None) == (offset is None)
+    A = scatter_matrix(group.dofs, group.params, n)
+    x = jnp.asarray(rng.normal(size=(3, n)))
+    form = jax.jit(jax.vmap(lambda x: group.quadratic_form(lambda p: p, x)))(x)
+    np.testing.assert_allclose(form, jnp.einsum("bi,ij,bj->b", x, A, x), rtol=1e-12)

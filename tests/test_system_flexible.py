@@ -149,12 +149,13 @@ def test_element_tangents_equal_the_jacobian_of_the_force(name):
     q = q0 + 1e-2 * jnp.asarray(rng.standard_normal(q0.shape))
     v = jnp.asarray(rng.standard_normal(q0.shape))
     x = jnp.asarray(rng.standard_normal(q0.shape))
-    K, C, jacobian, Mx, M, f, grad_energy = _body_functions(body, q, v, x)
+    K, C, jacobian, Mx, M, f, grad_energy, kinetic = _body_functions(body, q, v, x)
     scale = float(jnp.abs(K).max())
     np.testing.assert_allclose(K, jacobian, rtol=1e-12, atol=1e-12 * scale)
     np.testing.assert_array_equal(C, 0.0)
     assert not body.velocity_dependent_force
     np.testing.assert_allclose(Mx, M @ x, rtol=1e-12)
+    assert float(kinetic) == pytest.approx(0.5 * float(v @ M @ v), rel=1e-12)  # element by element, never assembled
     np.testing.assert_allclose(f, -grad_energy, rtol=1e-9, atol=1e-9 * scale)  # the force derives from the energy
     if body.bandwidth is not None:
         i, j = np.indices(K.shape)
@@ -166,7 +167,7 @@ def test_element_tangents_equal_the_jacobian_of_the_force(name):
 def _body_functions(body, q, v, x):
     K, C = body.tangents(q, v)
     return (K, C, -jax.jacfwd(body.internal_force)(q, v), body.mass_product(q, x), body.mass(q),
-            body.internal_force(q, v), jax.grad(body.strain_energy)(q))
+            body.internal_force(q, v), jax.grad(body.strain_energy)(q), body.kinetic_energy(q, v))
 
 
 @pytest.mark.parametrize("name", sorted(BODIES))

@@ -117,6 +117,10 @@ class AbstractBody(AbstractPart):
         C = -jax.jacfwd(self.internal_force, argnums=1)(q, v) if self.velocity_dependent_force else jnp.zeros_like(K)
         return K, C
 
+    def kinetic_energy(self, q: Vector, v: Vector) -> Scalar:
+        """½ vᵀ M(q) v [J]."""
+        return 0.5 * v @ self.mass_product(q, v)
+
     def strain_energy(self, q: Vector) -> Scalar:
         """Elastic energy [J]; zero for a rigid body."""
         return jnp.zeros((), q.dtype)

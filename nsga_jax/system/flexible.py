@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compat import dot_sum
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
@@ -132,6 +133,9 @@ class Beam2D(AbstractBody):
     def mass_product(self, q: Vector, x: Vector) -> Vector:
         return self.elements.matrix_product(lambda p: beam_mass(p, self.lumped), x)
 
+    def kinetic_energy(self, q: Vector, v: Vector) -> Scalar:
+        return 0.5 * self.elements.quadratic_form(lambda p: beam_mass(p, self.lumped), v)
+
     def internal_force(self, q: Vector, v: Vector) -> Vector:
         return self.elements.forces(beam_internal_force, q, v, self.n_dof)
 
@@ -139,7 +143,7 @@ class Beam2D(AbstractBody):
         return self.elements.tangents(beam_internal_force, q, v, self.n_dof, velocity_dependent=False)
 
     def strain_energy(self, q: Vector) -> Scalar:
-        return jnp.sum(jax.vmap(beam_energy)(self.elements.gather(q), self.elements.params))
+        return dot_sum(jax.vmap(beam_energy)(self.elements.gather(q), self.elements.params))
 
     def gravity_force(self, g: Vector) -> Vector:
         """Consistent nodal loads ρA g l_e / 2 from each element on its two nodes' (x, y)."""
@@ -246,6 +250,9 @@ class Bar(AbstractBody):
     def mass_product(self, q: Vector, x: Vector) -> Vector:
         return self.elements.matrix_product(self._element_mass, x)
 
+    def kinetic_energy(self, q: Vector, v: Vector) -> Scalar:
+        return 0.5 * self.elements.quadratic_form(self._element_mass, v)
+
     def internal_force(self, q: Vector, v: Vector) -> Vector:
         return self.elements.forces(bar_internal_force, q, v, self.n_dof)
 
@@ -269,7 +276,7 @@ class Bar(AbstractBody):
     def strain_energy(self, q: Vector) -> Scalar:
         """Σ_e EA (u_{e+1} - u_e)² / (2 l_e) [J]."""
         EA, le, _ = self.elements.params
-        return jnp.sum(0.5 * EA / le * (q[1:] - q[:-1]) ** 2)
+        return dot_sum(0.5 * EA / le * (q[1:] - q[:-1]) ** 2)
 
     def gravity_force(self, g: Vector) -> Vector:
         """Consistent nodal loads ρA g l_e / 2 from each element on its two nodes."""

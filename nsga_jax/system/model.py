@@ -284,10 +284,11 @@ class SystemModel(Model):
     def energy(self, q: Vector, v: Vector) -> Scalar:
         """Kinetic + strain energy of the bodies, plus the potential of every
         conservative force [J] (gravity's ``-f_g · q``)."""
-        energy = 0.5 * v @ self.mass_product(q, v)
-        for group, stacked in layout.body_groups(self):
+        energy = jnp.zeros((), q.dtype)
+        for group, stacked in layout.body_groups(self):  # an element body's element by element, never assembled
             (cols,) = group.columns
-            energy = energy + jnp.sum(call(group, lambda b, qb: b.strain_energy(qb), stacked, gather(q, cols)))
+            energy = energy + jnp.sum(call(group, lambda b, qb, vb: b.kinetic_energy(qb, vb) + b.strain_energy(qb),
+                                           stacked, gather(q, cols), gather(v, cols)))
         for parts in _force_parts(self):
             if isinstance(parts, Gravity):
                 energy = energy - _gravity_vector(self, parts, q.dtype) @ q

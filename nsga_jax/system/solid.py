@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compat import dot_sum
 from .._custom_types import Matrix, Scalar, Vector
 from .._util import as_float
 from ..assembly import ElementGroup, StaticIndex
@@ -175,7 +176,7 @@ class HexSolid(AbstractBody):
 
     def strain_energy(self, q: Vector) -> Scalar:
         group = self.elements
-        return jnp.sum(jax.vmap(svk_energy)(group.gather(q), group.params))
+        return dot_sum(jax.vmap(svk_energy)(group.gather(q), group.params))
 
     def gravity_force(self, g: Vector) -> Vector:
         """Consistent nodal loads of the acceleration ``g`` (3,), element by element."""
