@@ -24,7 +24,8 @@ ball's rebound heights (with MuJoCo's default contact and with its
 the damping ratio of a linear spring-damper that rebounds with e,
 ``ζ = -ln e / √(π² + ln² e)``).
 
-For each N the two run alternately, ``--repeats`` times, and the fastest
+MuJoCo's RK4 at the same step is timed too (for the chain; its contact
+steps are Euler's in practice). For each N the runs alternate, ``--repeats`` times, and the fastest
 of each is kept (MuJoCo through ``mj_step(..., nstep)``, so that Python's
 loop is not timed; nsga_jax's µs per step from its own statistics, compile
 apart). Needs ``pip install mujoco``::
@@ -116,21 +117,26 @@ def compare_chain(links: list[int], steps: int, repeats: int) -> list[str]:
     for n in links:
         model, q0, v0 = chain(n)
         first = nj.simulate(model, nj.DS(), 0.0, steps * H, H, q0, v0)
-        ours, theirs = math.inf, math.inf
+        ours, theirs, rk4 = math.inf, math.inf, math.inf
+        rk4_xml = chain_mjcf(n).replace("Euler", "RK4")
         for _ in range(repeats):  # alternately
             ours = min(ours, nj.simulate(model, nj.DS(), 0.0, steps * H, H, q0, v0).stats["us_per_step"])
             theirs = min(theirs, mujoco_run(chain_mjcf(n), steps, 1)[0])
+            rk4 = min(rk4, mujoco_run(rk4_xml, steps, 1)[0])
         _, data, _ = mujoco_run(chain_mjcf(n), steps, 1)
+        _, data_rk4, _ = mujoco_run(rk4_xml, steps, 1)
         reference_xml = chain_mjcf(n).replace(f'timestep="{H}"', f'timestep="{H / 10}"').replace("Euler", "RK4")
         _, reference, _ = mujoco_run(reference_xml, 10 * steps, 1)  # MuJoCo's RK4 at h / 10
         x, y, angle = np.asarray(first.q[-1][-3:])
         tip = np.array([x + LENGTH / 2 * math.cos(angle), y + LENGTH / 2 * math.sin(angle)])
         exact = reference.site_xpos[0][[0, 2]]
-        ours_error, their_error = (float(np.linalg.norm(p - exact)) for p in (tip, data.site_xpos[0][[0, 2]]))
+        ours_error, their_error, rk4_error = (float(np.linalg.norm(p - exact))
+                                              for p in (tip, data.site_xpos[0][[0, 2]], data_rk4.site_xpos[0][[0, 2]]))
         rows.append(f"| chain, {n} links | {model.n_dof} + {model.n_bilateral} constraints | {n} | "
                     f"{first.stats['compile_time_s']:.1f} | {ours:.0f} | {theirs:.1f} | {ours / theirs:.0f}× | "
-                    f"tip after {steps * H:g} s, from MuJoCo's RK4 at h / 10: nsga_jax {1e3 * ours_error:.3f} mm, "
-                    f"MuJoCo {1e3 * their_error:.3f} mm |")
+                    f"{rk4:.1f} | tip after {steps * H:g} s, from MuJoCo's RK4 at h / 10: nsga_jax "
+                    f"{1e3 * ours_error:.4f} mm, MuJoCo Euler {1e3 * their_error:.3f} mm, "
+                    f"RK4 {1e3 * rk4_error:.4f} mm |")
         print(rows[-1], flush=True)
     return rows
 
@@ -151,7 +157,7 @@ def compare_ball(steps: int, repeats: int, e: float = 0.8) -> list[str]:
         theirs, _, heights = mujoco_run(ball_mjcf(solref), steps, repeats, record=True)
         lowest = 1.0 + heights  # the slide joint's coordinate is the displacement from the start
         their_apex = ", ".join(f"{a:.3f}" for a in apexes(lowest)[:3])
-        rows.append(f"| ball, MuJoCo {label} | 1 | 1 | – | {ours:.1f} | {theirs:.2f} | {ours / theirs:.0f}× | "
+        rows.append(f"| ball, MuJoCo {label} | 1 | 1 | – | {ours:.1f} | {theirs:.2f} | {ours / theirs:.0f}× | – | "
                     f"apexes {their_apex} m, lowest point {1e3 * float(lowest.min()):.1f} mm (nsga_jax: "
                     f"{ours_apex} m, {1e3 * float(z.min()):.0e} mm; exact: {exact} m) |")
         print(rows[-1], flush=True)
@@ -170,7 +176,7 @@ def main() -> None:
     except ImportError:
         sys.exit("bench_mujoco.py needs MuJoCo: pip install mujoco")
     header = ("| scene | nsga_jax coordinates | MuJoCo coordinates | nsga_jax compile [s] | nsga_jax µs/step "
-              "| MuJoCo µs/step | ratio | the motions compared |")
+              "| MuJoCo µs/step (Euler) | ratio | MuJoCo µs/step (RK4) | the motions compared |")
     print(header)
     rows = compare_chain(args.links, args.steps, args.repeats) + compare_ball(3000, args.repeats)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
@@ -179,7 +185,7 @@ def main() -> None:
             f"{platform.machine()} {os.cpu_count()}-core CPU, load average {os.getloadavg()[0]:.1f} at the end; "
             f"the ball over 3 s")
     args.out.mkdir(parents=True, exist_ok=True)
-    table = [meta, "", header, "|---|---|---|---|---|---|---|---|", *rows]
+    table = [meta, "", header, "|---|---|---|---|---|---|---|---|---|", *rows]
     (args.out / "mujoco.md").write_text("\n".join(table) + "\n")
     print(meta)
 
