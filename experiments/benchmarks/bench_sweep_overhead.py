@@ -43,6 +43,7 @@ PHASES = {  # name in the table: the profiled function (file suffix, function na
     "build the batches' models (build_batch)": ("sweep_build.py", "build_batch"),
     "stack models": ("batch.py", "stack_models"),
     "batches incl. compile (BatchRun)": ("batch.py", "__init__"),
+    "join the records to the initial rows (joined_records)": ("batch.py", "joined_records"),
     "observables (sweep_build)": ("sweep_build.py", "observables_of"),
     "rows (_row)": ("sweep.py", "_row"),
     "member solutions": ("batch.py", "member_solution"),
