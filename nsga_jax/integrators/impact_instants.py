@@ -150,7 +150,8 @@ def open_contacts(gaps: jax.Array, closed: jax.Array | None) -> jax.Array:
 
 def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: float, h: Scalar,
                   together: Scalar | float = 0.0, hold: bool = False,
-                  path: Callable[[Scalar], Vector] | None = None) -> tuple[jax.Array, Scalar, jax.Array]:
+                  path: Callable[[Scalar], Vector] | None = None,
+                  g0: Vector | None = None) -> tuple[jax.Array, Scalar, jax.Array]:
     """Whether a contact open at ``state`` (:func:`open_contacts`) closes
     inside (0, span] along ``path`` (by default the Taylor path), the
     earliest such instant s* [s] (relative to the state's time), and the
@@ -159,8 +160,10 @@ def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: fl
     Instants within ``min_fraction · h`` of 0 or of ``span`` are not
     reported (the paper's step is kept for them). ``hold`` (static): where
     a contact is closed at the state and another is open, the Taylor path's
-    acceleration is :func:`held_acceleration` (dense models), else v̇̃."""
-    g0 = model.unilateral(state.q)
+    acceleration is :func:`held_acceleration` (dense models), else v̇̃.
+    ``g0``: the unilateral gaps (nu,) [m] at ``state`` where the caller has
+    them."""
+    g0 = model.unilateral(state.q) if g0 is None else g0
     is_open = open_contacts(g0, state.closed)
     if path is None:
         acceleration = None
@@ -277,12 +280,13 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     # step): measured, the worst case over four scenes is then 1.2x the option
     # off, against 2.2x with it inside (docs/impact-instants.md, *Run time*).
     new, taken, smooth_end = scheme.paper_step(model, ops, state, h)
-    located = first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h, hold)
-    closed_by_step = (taken.active_position | taken.active_velocity)[nb:] & open_contacts(
-        model.unilateral(state.q), state.closed)
+    g0 = model.unilateral(state.q)  # the start's gaps, evaluated once for the three uses below
+    located = first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h, hold, g0=g0)
+    closed_by_step = (taken.active_position | taken.active_velocity)[nb:] & open_contacts(g0, state.closed)
     missed = ~located[0] & jnp.any(closed_by_step)
     located = lax.cond(missed, lambda: first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h,
-                                                     path=hermite_path(state, smooth_end, h)), lambda: located)
+                                                     path=hermite_path(state, smooth_end, h), g0=g0),
+                       lambda: located)
 
     def split(state):
         t_end = state.t + h
