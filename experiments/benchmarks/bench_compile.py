@@ -10,7 +10,12 @@ its default configuration::
 prints and writes ``DIR/compile.md``: per scene, the chunk program's size
 (equations of its jaxpr, nested ones included), the seconds of tracing it
 (``jax.make_jaxpr``), of tracing and lowering it (``lower``), and of XLA's
-compilation (``compile``), and the same three for the preparation.
+compilation (``compile``), and the same three for the preparation. Then,
+warm: two more fresh processes with nsga_jax's persistent compilation cache
+in a new folder, the first filling it, the second loading both programs from
+it (``use_compilation_cache``, as the command line does); the second's
+tracing, lowering and loading of both programs together, and its loading
+alone.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import os
 import platform
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -92,11 +98,16 @@ def main() -> None:
     parser.add_argument("--scenes", default="all")
     parser.add_argument("--out", default="experiments/out/compile")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # the child process: measure this scene, print JSON
+    parser.add_argument("--cache", help=argparse.SUPPRESS)  # the child's persistent compilation cache
     args = parser.parse_args()
     if args.one:
         from nsga_jax.process_settings import configure_jax
 
         configure_jax()
+        if args.cache:
+            from nsga_jax.compilation_cache import use_compilation_cache
+
+            use_compilation_cache(args.cache)
         print(json.dumps(measure(args.one)))
         return
     from nsga_jax.scenes import REGISTRY
@@ -104,28 +115,42 @@ def main() -> None:
     names = sorted(REGISTRY) if args.scenes == "all" else args.scenes.split(",")
     rows = []
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
-    for name in names:
-        proc = subprocess.run([sys.executable, __file__, "--one", name], capture_output=True, text=True, env=env)
+
+    def child(name: str, *extra: str) -> dict | None:
+        proc = subprocess.run([sys.executable, __file__, "--one", name, *extra], capture_output=True, text=True,
+                              env=env)
         if proc.returncode:
             print(f"{name}: failed\n{proc.stderr[-2000:]}", file=sys.stderr)
+            return None
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    for name in names:
+        cold = child(name)
+        with tempfile.TemporaryDirectory() as cache:
+            fills, warm = child(name, "--cache", cache), child(name, "--cache", cache)  # the second loads
+        if cold is None or fills is None or warm is None:
             continue
-        rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+        cold["warm_s"] = sum(warm[f"{p}_lower_s"] + warm[f"{p}_compile_s"] for p in ("chunk", "prepare"))
+        cold["warm_load_s"] = warm["chunk_compile_s"] + warm["prepare_compile_s"]
+        rows.append(cold)
         r = rows[-1]
         print(f"{name}: chunk {r['chunk_equations']} eqns, trace {r['chunk_trace_s']:.2f} s, lower "
-              f"{r['chunk_lower_s']:.2f} s, XLA {r['chunk_compile_s']:.2f} s", flush=True)
+              f"{r['chunk_lower_s']:.2f} s, XLA {r['chunk_compile_s']:.2f} s; warm {r['warm_s']:.2f} s", flush=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     lines = [
         f"`python experiments/benchmarks/bench_compile.py`, {datetime.date.today()}, commit {commit}, "
         f"{platform.node()} ({platform.machine()}), cold (a fresh process per scene, no compilation cache).",
         "",
         "| scene | n | chunk: equations | trace [s] | trace + lower [s] | XLA compile [s] "
-        "| preparation: equations | trace [s] | trace + lower [s] | XLA compile [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| preparation: equations | trace [s] | trace + lower [s] | XLA compile [s] "
+        "| warm: both programs' trace + lower + load [s] | of which loading [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(f"| {r['scene']} | {r['n_dof']} | {r['chunk_equations']} | {r['chunk_trace_s']:.2f} | "
                      f"{r['chunk_lower_s']:.2f} | {r['chunk_compile_s']:.2f} | {r['prepare_equations']} | "
-                     f"{r['prepare_trace_s']:.2f} | {r['prepare_lower_s']:.2f} | {r['prepare_compile_s']:.2f} |")
+                     f"{r['prepare_trace_s']:.2f} | {r['prepare_lower_s']:.2f} | {r['prepare_compile_s']:.2f} | "
+                     f"{r['warm_s']:.2f} | {r['warm_load_s']:.2f} |")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "compile.md").write_text("\n".join(lines) + "\n")
