@@ -21,9 +21,9 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("numerics", {"integrators", "adjoint", "impact_time", "impact_time_friction"}),
     ("runs", {"saveat", "_integrate", "_simulate", "_run_core", "solution", "monitors", "diagnosis", "batch",
               "distributed", "run_inputs", "chunks", "memory", "progress", "first_step"}),
-    ("application", {"scenes", "cli", "cli_options", "cli_config", "bench", "sweep", "sweep_build", "sweep_checks",
-                     "grid", "identify", "fit_steps", "data", "studies", "output", "plotting", "sweep_plot", "folders",
-                     "tables", "metrics", "animate"}),
+    ("application", {"scenes", "cli", "cli_options", "cli_config", "bench", "sweep", "sweep_batches", "sweep_build",
+                     "sweep_checks", "grid", "identify", "fit_steps", "data", "studies", "output", "plotting",
+                     "sweep_plot", "folders", "tables", "metrics", "animate"}),
     ("package", {"__init__", "examples"}),  # examples/: a user's scene file, on the public API
 ]
 LEVEL = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}

@@ -45,7 +45,7 @@ PHASES = {  # name in the table: the profiled function (file suffix, function na
     "batches incl. compile (BatchRun)": ("batch.py", "__init__"),
     "join the records to the initial rows (joined_records)": ("batch.py", "joined_records"),
     "observables (sweep_build)": ("sweep_build.py", "observables_of"),
-    "rows (_row)": ("sweep.py", "_row"),
+    "rows (_row)": ("sweep_batches.py", "_row"),
     "member solutions": ("batch.py", "member_solution"),
     "plot": ("sweep.py", "plot_sweep"),
 }
