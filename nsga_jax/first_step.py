@@ -89,7 +89,8 @@ def first_step_factorisations(model: Model, scheme: AbstractScheme) -> float:
 
     From the kinds of the iteration matrices the step solves with (static
     structure only, nothing evaluated): a constant one is inverted once per
-    step size (:data:`INVERSE_LUS`; a block-tridiagonal one costs O(n)); a
+    step size (:data:`INVERSE_LUS`; a block-tridiagonal one costs O(n), as
+    does a system's block elimination, :mod:`~nsga_jax.integrators.structured`); a
     held one (DS and DSn in large models) is factorised at the first step's
     first iteration, a refactored one at every iteration. Counted are the
     iterations every step makes: one of the smooth motion in DS and DSn
@@ -100,6 +101,7 @@ def first_step_factorisations(model: Model, scheme: AbstractScheme) -> float:
     """
     from .integrators.ds import AbstractGenAlpha
     from .integrators.iteration_matrix import ConstantInverse, ConstantTridiagonal
+    from .integrators.structured import Structured
     from .memory import assembles_nothing, present_subproblems
 
     kinds = [k for k, p in zip(scheme.matrix_kinds(model), present_subproblems(model, scheme)) if p]
@@ -111,7 +113,7 @@ def first_step_factorisations(model: Model, scheme: AbstractScheme) -> float:
     for kind, iterates in zip(kinds, every):
         if issubclass(kind, ConstantInverse):
             count += INVERSE_LUS
-        elif not issubclass(kind, ConstantTridiagonal) and not kind.is_constant and iterates:
+        elif not issubclass(kind, (ConstantTridiagonal, Structured)) and not kind.is_constant and iterates:
             count += 1.0
     return count
 

@@ -24,7 +24,8 @@ RATE = first_step.LU_RATE
 """A fixed LU rate [operations/s], so the figures below do not depend on this machine's load."""
 
 STRUCTURE = ("n_bilateral", "n_constraints", "n_unilateral", "n_friction", "constant_mass", "linear_force",
-             "linear_constraints", "velocity_dependent_force", "matrix_free", "bandwidth")
+             "linear_constraints", "velocity_dependent_force", "matrix_free", "bandwidth",
+             "body_coupling")
 
 
 @pytest.fixture(scope="module")

@@ -53,6 +53,7 @@ from .model_terms import (
     VaryingJacobian,
     VaryingMass,
 )
+from .structured import Structured, structured_applies
 
 MatrixKinds = tuple[type[AbstractIterationMatrix], type[AbstractIterationMatrix], type[AbstractIterationMatrix]]
 """The kinds of the smooth, position and velocity iteration matrices."""
@@ -104,8 +105,11 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
     force, and, where it holds the constraints' curvature
     (``needs_constant_G``; the smooth one only through the bilateral rows),
     affine constraints; a chain of half-bandwidth 1 then solves it by block
-    elimination. Otherwise it is refactored at every iteration, or held
-    between iterations and steps when ``hold``. ``present``: the scheme has
+    elimination. A system of bodies whose coupling orders its bordered
+    matrix into enough blocks (:mod:`~nsga_jax.integrators.structured`;
+    frictionless) solves every present sub-problem by block elimination.
+    Otherwise a matrix is refactored at every iteration, or held between
+    iterations and steps when ``hold``. ``present``: the scheme has
     that sub-problem (the position and velocity ones only with constraints).
     ``enabled=False`` (the generic path) refactors everything.
 
@@ -128,12 +132,16 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
             if p else Refactored
             for p, stiff in zip(present, holds_stiffness))
 
-    def kind(is_present: bool, needs_G: bool) -> type[AbstractIterationMatrix]:
+    def kind(is_present: bool, needs_G: bool, rows: int) -> type[AbstractIterationMatrix]:
+        if is_present and linear and (constant_G or not needs_G) and tridiagonal:
+            return ConstantTridiagonal
+        if is_present and enabled and model.n_friction == 0 and structured_applies(model.body_coupling, rows):
+            return Structured
         if is_present and linear and (constant_G or not needs_G):
-            return ConstantTridiagonal if tridiagonal else ConstantInverse
+            return ConstantInverse
         return Held if (is_present and enabled and hold) else Refactored
 
-    return kind(present[0], needs[0]), kind(present[1], needs[1]), kind(present[2], needs[2])
+    return kind(present[0], needs[0], nb), kind(present[1], needs[1], nc), kind(present[2], needs[2], nc)
 
 
 def generic_operators() -> Operators:
@@ -187,6 +195,9 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
 
     def build(kind: type[AbstractIterationMatrix], top_left: TopLeft | None, rows: int,
               tangential: bool = False) -> AbstractIterationMatrix:
+        if kind is Structured:
+            assert model.body_coupling is not None  # matrix_kinds: structured_applies
+            return Structured(model.body_coupling)
         if not issubclass(kind, (ConstantInverse, ConstantTridiagonal)):
             return kind()
         assert top_left is not None and M is not None and K is not None and C is not None  # matrix_kinds: linear

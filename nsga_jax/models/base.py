@@ -31,6 +31,7 @@ from .._custom_types import ConstraintMatrix, ConstraintVector, Matrix, Scalar, 
 from ..results import ConfigError
 from ..validation import Range, integer
 from .capabilities import ElementBlocks, EnergyMonitor, FrictionalContacts
+from .coupling import BodyCoupling
 
 
 def count_rule(name: str, value, lo: int = 1) -> str | None:
@@ -127,6 +128,15 @@ class Model(FrictionalContacts, ElementBlocks, EnergyMonitor):
         declared band the matrices do not have gives wrong products: declare
         it from the element-to-dof map (the bar's test checks its band against
         the assembled M and K)."""
+        return None
+
+    @property
+    def body_coupling(self) -> BodyCoupling | None:
+        """Which coordinates M, K, C and the constraint rows couple, body by
+        body (:class:`~nsga_jax.models.coupling.BodyCoupling`), or ``None``
+        (any coordinate with any). A system of bodies declares it from its
+        parts; a chain's or tree's iteration matrices are then solved by
+        block elimination (:mod:`~nsga_jax.integrators.structured`)."""
         return None
 
     @property

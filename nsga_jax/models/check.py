@@ -47,8 +47,9 @@ def check_model(model: Model, q=None, v=None, t: float = 0.0, *, samples: int = 
     and ``tangents`` against ``mass`` and ``jax.jacfwd(force)``;
     ``constant_mass``, ``linear_force`` (K and C the same at every state),
     ``velocity_dependent_force=False`` (no ∂f/∂v), ``linear_constraints``
-    (the same g_q at every state) and a declared ``bandwidth`` (M and K zero
-    outside the band), with friction its structure (normal rows,
+    (the same g_q at every state), a declared ``bandwidth`` (M and K zero
+    outside the band) and ``body_coupling`` (M, K, C and g_q zero between
+    what it does not couple), with friction its structure (normal rows,
     coefficients, the tangent Jacobian's shape), for a ``matrix_free``
     model its element blocks and node rows against M, K and g_q, and with an
     energy its kinetic part (∂E/∂v = M v) and, where the force is
@@ -173,6 +174,29 @@ def _bandwidth(model: Model, s: _Samples, fail: Fail) -> None:
             fail("bandwidth", f"declared {b}, but {name} has entries up to {worst:.3g} outside that band")
 
 
+def _body_coupling(model: Model, s: _Samples, fail: Fail) -> None:
+    """M, K and C zero between bodies that no force couples; each row of g_q
+    zero outside its bodies' coordinates (the constraints' curvature then
+    stays within them too)."""
+    coupling = model.body_coupling
+    assert coupling is not None
+    n, m = model.n_dof, model.n_constraints
+    if coupling.dofs and (coupling.dofs[0][0] != 0 or coupling.dofs[-1][1] != n or len(coupling.rows) != m):
+        fail("body_coupling", f"declares coordinates 0..{coupling.dofs[-1][1]} and {len(coupling.rows)} rows, "
+                              f"the model has {n} coordinates and {m} rows")
+        return
+    outside = ~coupling.allowed_matrix()
+    for name, matrices in (("M", s.masses), ("K", s.stiffness), ("C", s.damping)):
+        worst = max(float(np.abs(np.asarray(A))[outside].max(initial=0.0)) for A in matrices)
+        if worst > 0.0:
+            fail("body_coupling", f"declared, but {name} couples bodies it does not name (entries up to {worst:.3g})")
+    if m:
+        outside = ~coupling.allowed_rows()
+        worst = max(float(np.abs(np.asarray(G))[outside].max(initial=0.0)) for G in s.jacobians)
+        if worst > 0.0:
+            fail("body_coupling", f"declared, but g_q has entries up to {worst:.3g} outside its rows' bodies")
+
+
 def _energy(model: Model, s: _Samples, fail: Fail) -> None:
     """The energy's kinetic part is ½ vᵀ M(q) v: ∂E/∂v = M(q) v at every
     state. Where the force is conservative (a constant mass, no dependence on
@@ -270,6 +294,7 @@ CAPABILITIES: tuple[Capability, ...] = (
     Capability("matrix_free", lambda m: m.matrix_free, lambda m, s, fail: _check_matrix_free(
         m, s.states, s.masses, s.stiffness, s.jacobians, fail)),
     Capability("bandwidth", lambda m: m.bandwidth is not None, _bandwidth),
+    Capability("body_coupling", lambda m: m.body_coupling is not None, _body_coupling),
     Capability("energy", lambda m: m.has_energy, _energy),
 )
 """Each structure flag and capability :func:`check_model` checks where a

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._custom_types import Vector
+from ..models.coupling import BodyCoupling
 from .base import GROUND, AbstractBody, AbstractConstraint, Ground
 from .groups import Group, columns_of, gather, group_by_kind, kind_of, stack
 
@@ -181,3 +182,25 @@ def reference_rule(model: SystemModel) -> str | None:
                 return (f"{kind}.{name}: body_a = body_b = {slots[0]!r}, a rigid body; between two points of one "
                         f"rigid body {quantity}: name two different bodies{nodes}")
     return None
+
+
+def body_coupling(model: SystemModel) -> BodyCoupling:
+    """Which coordinates the model's matrices couple (static): each body's
+    coordinates; each row's bodies (a body's own rows, then each joint's and
+    contact's on the moving bodies it names); the pairs of bodies a force
+    that depends on the state acts on."""
+    index = {name: i for i, name in enumerate(model.body_names)}
+    slices = body_slices(model)
+    dofs = tuple((slices[name].start, slices[name].stop) for name in model.body_names)
+    rows: list[tuple[int, ...]] = []
+    for i, b in enumerate(model.bodies):
+        rows.extend([(i,)] * b.n_bilateral)
+    for part in (*model.joints, *model.contacts):
+        moving = tuple(sorted({index[name] for name in part.bodies if name != GROUND}))
+        rows.extend([moving] * part.count(bodies_of(model, part)))
+    pairs: set[tuple[int, int]] = set()
+    for force in model.forces:
+        acted = sorted({index[name] for name in force.bodies if name != GROUND})
+        if len(acted) > 1 and force.depends_on_state(bodies_of(model, force)):
+            pairs.update((a, b) for a in acted for b in acted if a < b)
+    return BodyCoupling(dofs, tuple(rows), tuple(sorted(pairs)))

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
 from ..models.base import Model
+from ..models.coupling import BodyCoupling
 from ..results import ConfigError
 from . import layout
 from . import matrix_free as large
@@ -117,6 +118,11 @@ class SystemModel(Model):
         if any(f.depends_on_state(layout.bodies_of(self, f)) for f in self.forces):
             return None
         return max(b for b in bands if b is not None)
+
+    @property
+    def body_coupling(self) -> BodyCoupling:
+        """Each body's coordinates, each row's bodies, the bodies a force couples (:func:`layout.body_coupling`)."""
+        return layout.body_coupling(self)
 
     # a large model solved without assembling (system/matrix_free.py)
     matrix_free = property(large.is_matrix_free)  # type: ignore[assignment]
