@@ -51,9 +51,12 @@ from .linalg import AbstractFactorisation, redundancy_shift
 
 MIN_BLOCKS = 20
 """The fewest blocks for which the block elimination replaces the dense
-factorisations: on a chain of links a DS step costs about the same both
-ways at 12 links, 0.84× the dense one at 20, 0.57× at 50 and 0.20× at 100
-(``experiments/benchmarks/bench_structured.py``, docs/performance.md)."""
+factorisations. On a chain of links (``experiments/benchmarks/bench_structured.py``,
+docs/performance.md) one correction costs the same both ways at 20 links
+and less from there on (148 against 575 µs at 50); a whole DS step is
+faster from about 12 links (137 against 172 µs), but its program compiles
+0.6–1.1 s longer, which a run of 10,000 steps at 12 links does not win back.
+"""
 
 
 class Gathers(NamedTuple):
