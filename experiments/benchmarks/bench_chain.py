@@ -74,13 +74,18 @@ def main() -> None:
         rows.append(f"| {r['links']} | {r['dofs']} | {r['constraints']} | {r['compile_s']:.1f} | "
                     f"{r['us_per_step']:.0f} | {r['newton']:.2f} | {r['result']} |")
         print(rows[-1], flush=True)
+    write_table(args.out, f"python experiments/benchmarks/bench_chain.py --links {' '.join(map(str, args.links))} "
+                          f"--steps {args.steps}", header, rows)
+
+
+def write_table(out: Path, command: str, header: str, rows: list[str]) -> None:
+    """Save the Markdown table under a line saying how, when, at which commit
+    and on what machine it was made; print that line."""
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    load = os.getloadavg()[0]
-    meta = (f"`python experiments/benchmarks/bench_chain.py --links {' '.join(map(str, args.links))} "
-            f"--steps {args.steps}`, {date.today()}, commit {commit}, {platform.machine()} "
-            f"{os.cpu_count()}-core CPU, load average {load:.1f} at the end")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join([meta, "", header, "|---|---|---|---|---|---|---|", *rows]) + "\n")
+    meta = (f"`{command}`, {date.today()}, commit {commit}, {platform.machine()} {os.cpu_count()}-core CPU, "
+            f"load average {os.getloadavg()[0]:.1f} at the end")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join([meta, "", header, "|---" * header.count(" | ") + "|---|", *rows]) + "\n")
     print(meta)
 
 

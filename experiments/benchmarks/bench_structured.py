@@ -17,12 +17,8 @@ Two measurements, each interleaving the two solves:
 from __future__ import annotations
 
 import argparse
-import os
-import platform
-import subprocess
 import sys
 import time
-from datetime import date
 from pathlib import Path
 
 import jax
@@ -32,7 +28,7 @@ from nsga_jax.process_settings import configure_jax
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_chain import chain  # noqa: E402
+from bench_chain import chain, write_table  # noqa: E402
 
 
 def correction_us(model, q0, repeats: int) -> tuple[float, float]:
@@ -107,13 +103,8 @@ def main() -> None:
         rows.append(f"| {n} | {layout.blocks} × {layout.unknowns.shape[1]} | {blocks_us:.0f} | {dense_us:.0f} | "
                     f"{on[0]:.0f} | {off[0]:.0f} | {on[1]:.1f} / {off[1]:.1f} |")
         print(rows[-1], flush=True)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    meta = (f"`python experiments/benchmarks/bench_structured.py --links {' '.join(map(str, args.links))}`, "
-            f"{date.today()}, commit {commit}, {platform.machine()} {os.cpu_count()}-core CPU, "
-            f"load average {os.getloadavg()[0]:.1f} at the end")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join([meta, "", header, "|---|---|---|---|---|---|---|", *rows]) + "\n")
-    print(meta)
+    write_table(args.out, f"python experiments/benchmarks/bench_structured.py --links {' '.join(map(str, args.links))}",
+                header, rows)
 
 
 if __name__ == "__main__":
