@@ -145,6 +145,10 @@ def test_a_ring_gets_two_bodies_per_block_and_a_star_stays_dense():
                         rows=tuple((0, i) for i in range(1, 12)), pairs=())
     assert block_layout(star, 11) is None  # every body couples with the hub: one block
     assert block_layout(chain(SMALL - 1).body_coupling, 0) is None
+    heavy = BodyCoupling(dofs=((0, 60),) + tuple((60 + 3 * i, 63 + 3 * i) for i in range(11)),
+                         rows=tuple((i, i + 1) for i in range(11)), pairs=())
+    assert block_layout(heavy, 11) is None  # a block of 60 coordinates and more: dense
+    assert block_layout(heavy._replace(dofs=tuple((3 * i, 3 * i + 3) for i in range(12))), 11) is not None
 
 
 def test_structure_is_chosen_at_trace_time(monkeypatch):

@@ -59,6 +59,12 @@ faster from about 12 links (137 against 172 µs), but its program compiles
 """
 
 
+MAX_BLOCK = 48
+"""The largest block the elimination takes: its Gauss–Jordan inverse is
+unrolled over the block's unknowns, so a system whose blocks would be larger
+(a flexible body of many nodes among the links) keeps the dense path."""
+
+
 class Gathers(NamedTuple):
     """Where the bordered matrix's entries of a set of block positions come
     from (static flat indices, each with its mask), shape (..., s, s) each:
@@ -137,7 +143,7 @@ def _body_order(coupled: np.ndarray) -> np.ndarray:
 def block_layout(coupling: BodyCoupling, n_rows: int) -> BlockLayout | None:
     """The block-tridiagonal layout of a sub-problem with the first ``n_rows``
     constraint rows (module docstring), or ``None`` where it has fewer than
-    :data:`MIN_BLOCKS` blocks."""
+    :data:`MIN_BLOCKS` blocks or one larger than :data:`MAX_BLOCK`."""
     coupled = coupling.coupled_bodies(n_rows)
     order = _body_order(coupled)
     position = np.empty_like(order)
@@ -150,9 +156,9 @@ def block_layout(coupling: BodyCoupling, n_rows: int) -> BlockLayout | None:
     for row, bodies in enumerate(coupling.rows[:n_rows]):
         members[max((position[b] for b in bodies), default=0)].append(n + row)
     blocks = [sum(members[i:i + width], []) for i in range(0, len(members), width)]
-    if len(blocks) < MIN_BLOCKS:
-        return None
     size = max(len(b) for b in blocks)
+    if len(blocks) < MIN_BLOCKS or size > MAX_BLOCK:
+        return None
     index = -1 - np.arange(len(blocks) * size, dtype=np.int32).reshape(len(blocks), size)  # padding: distinct
     for i, b in enumerate(blocks):
         index[i, :len(b)] = b
@@ -257,5 +263,5 @@ def structured_applies(coupling: BodyCoupling | None, n_rows: int) -> bool:
     return coupling is not None and block_layout(coupling, n_rows) is not None
 
 
-__all__ = ["MIN_BLOCKS", "BlockLayout", "Structured", "StructuredFactorisation", "block_layout",
+__all__ = ["MAX_BLOCK", "MIN_BLOCKS", "BlockLayout", "Structured", "StructuredFactorisation", "block_layout",
            "solve_structured", "structured_applies"]
