@@ -210,7 +210,7 @@ def released(model, speed=1.0):
     return q0, v0.at[-1].set(speed / LENGTH)
 
 
-@pytest.mark.parametrize("scheme", ["DS", "DSn", "CS", "MJ"])
+@pytest.mark.parametrize("scheme", ["DS", *(pytest.param(s, marks=pytest.mark.slow) for s in ("DSn", "CS", "MJ"))])
 def test_a_chain_runs_as_on_the_dense_path(scheme):
     model = chain(8)
     q0, v0 = released(model)
@@ -226,6 +226,7 @@ def test_a_chain_runs_as_on_the_dense_path(scheme):
     assert abs(tip.min() + 0.6 * 8 * LENGTH) < (2e-3 if scheme == "MJ" else 1e-4)
 
 
+@pytest.mark.slow
 def test_a_closed_ring_holds_its_pins():
     model = chain(12, ring=True)
     assert nj.DS().matrix_kinds(model)[0] is Structured
@@ -237,6 +238,7 @@ def test_a_closed_ring_holds_its_pins():
     np.testing.assert_allclose(runs[0].q, runs[1].q, atol=1e-10)
 
 
+@pytest.mark.slow
 def test_float32_and_batches_run_as_on_the_dense_path():
     model = chain(8)
     q0, v0 = released(model)
