@@ -23,7 +23,6 @@ import jax.numpy as jnp
 
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
 from ..models.base import Model
-from ..models.coupling import BodyCoupling
 from ..results import ConfigError
 from . import layout
 from . import matrix_free as large
@@ -119,11 +118,8 @@ class SystemModel(Model):
             return None
         return max(b for b in bands if b is not None)
 
-    @property
-    def body_coupling(self) -> BodyCoupling:
-        """Each body's coordinates, each row's bodies, the bodies a force couples (:func:`layout.body_coupling`)."""
-        return layout.body_coupling(self)
-
+    # each body's coordinates, each row's bodies, the bodies a force couples (integrators/structured.py)
+    body_coupling = property(layout.body_coupling)  # type: ignore[assignment]
     # a large model solved without assembling (system/matrix_free.py)
     matrix_free = property(large.is_matrix_free)  # type: ignore[assignment]
     element_mass = large.element_mass
