@@ -38,8 +38,9 @@ def check_scheme(scheme) -> None:
     >= 1, integer sizes >= 0 for DS's fast paths (``krylov_min_dof`` may be
     ``None``), DS's ``impact_law`` one of :data:`~nsga_jax.validation.IMPACT_LAWS`,
     its ``impact_instants`` a bool with ``max_impacts >= 1`` and
-    ``0 <= late < min_fraction < 0.5``, and its own settings in their ranges (concrete values only:
-    traced settings are checked where they were made)."""
+    ``0 <= late < min_fraction < 0.5``, its ``warm_start`` a bool, and its own
+    settings in their ranges (concrete values only: traced settings are
+    checked where they were made)."""
     require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
     integer("max_iter", scheme.max_iter, 1)
     if hasattr(scheme, "reuse_min_dof"):
@@ -55,6 +56,8 @@ def check_scheme(scheme) -> None:
         real("min_fraction", scheme.min_fraction, 0.0, 0.5, lo_open=True, hi_open=True)
         real("late", scheme.late, 0.0, scheme.min_fraction, hi_open=True,
              note="a fraction of h, below min_fraction")
+    if hasattr(scheme, "warm_start") and not isinstance(scheme.warm_start, (bool, np.bool_)):
+        raise ConfigError(f"warm_start must be True or False, got {describe(scheme.warm_start)}")
     settings = {"tol_r": (scheme.tol_r, 0.0, math.inf), "tol_f": (scheme.tol_f, 0.0, math.inf), **scheme.bounds()}
     for name, (value, lo, hi) in settings.items():
         if isinstance(value, jax.core.Tracer):

@@ -12,7 +12,8 @@ Targets: 10 boxes, 10 s at h = 1e-3 s, 0 failed steps, drift < 1e-9 m, in
 2D and 3D; pushed, 0 failed steps and at rest at the end.
 
     python experiments/benchmarks/bench_stack.py [--boxes 10] [--dims 2 3] [--t-rest 10] [--t-push 3]
-                                                 [--push 2.0] [--h 1e-3] [--impacts end|instants] [--out FILE]
+                                                 [--push 2.0] [--h 1e-3] [--impacts end|instants]
+                                                 [--newton-start zero previous] [--out FILE]
 """
 
 from __future__ import annotations
@@ -33,19 +34,21 @@ HEADER = ("| dim | boxes | case | t_end [s] | failed steps | drift [m] | positio
           "velocity its. mean / max | max penetration [m] | final speed [m/s] | wall [s] |")
 
 
-def measure(dim: int, boxes: int, push: float, t_end: float, h: float, impacts: str = "end") -> dict:
+def measure(dim: int, boxes: int, push: float, t_end: float, h: float, impacts: str = "end",
+            newton_start: str = "zero") -> dict:
     import numpy as np
 
     from nsga_jax.scenes import load_scene
 
     scene = load_scene("box_stack", {"dim": dim, "n_boxes": boxes, "push": push, "t_end": t_end, "h": h,
-                                      "impacts": impacts})
+                                      "impacts": impacts, "newton_start": newton_start})
     start = time.perf_counter()
     sol = scene.run(throw=False)
     wall = time.perf_counter() - start
     its = sol.stats["iterations"]
     obs = sol.observables
     case = "rest" if push == 0 else f"push {push:g} m/s"
+    case += ", Newton from the last step's multipliers" if newton_start == "previous" else ""
     if impacts == "instants":
         case += f", {sol.stats['impacts_at_instants']} impacts at instants, {sol.stats['instant_fallbacks']} fall-backs"
     return dict(dim=dim, boxes=boxes, case=case, t_end=t_end,
@@ -71,18 +74,23 @@ def main() -> None:
     parser.add_argument("--h", type=float, default=1e-3)
     parser.add_argument("--impacts", choices=("end", "instants"), default="end",
                         help="DS's impacts at the ends of their steps (the paper's) or at their instants")
+    parser.add_argument("--newton-start", nargs="+", choices=("zero", "previous"), default=["zero"],
+                        help="Newton's start of each step's position correction and velocity jump: zero "
+                             "multipliers (the paper's) or the last step's; several are interleaved case by case")
     parser.add_argument("--out", type=Path, default=Path("experiments/out/bench_stack.md"))
     args = parser.parse_args()
     rows = []
     print(HEADER, flush=True)
     for dim in args.dims:
         for push, t_end in ((0.0, args.t_rest), (args.push, args.t_push)):
-            rows.append(row(measure(dim, args.boxes, push, t_end, args.h, args.impacts)))
-            print(rows[-1], flush=True)
+            for start in args.newton_start:
+                rows.append(row(measure(dim, args.boxes, push, t_end, args.h, args.impacts, start)))
+                print(rows[-1], flush=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     meta = (f"`python experiments/benchmarks/bench_stack.py --boxes {args.boxes} --dims "
             f"{' '.join(map(str, args.dims))} --t-rest {args.t_rest:g} --t-push {args.t_push:g} --push {args.push:g} "
-            f"--h {args.h:g} --impacts {args.impacts}`, {date.today()}, commit {commit}, {platform.machine()} "
+            f"--h {args.h:g} --impacts {args.impacts} --newton-start {' '.join(args.newton_start)}`, "
+            f"{date.today()}, commit {commit}, {platform.machine()} "
             f"{os.cpu_count()}-core CPU, "
             f"load average {os.getloadavg()[0]:.1f} at the end")
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -36,7 +36,10 @@ class StepState(eqx.Module):
     closed (nu,) bool: the unilateral contacts the step closed (active in
     its position correction), which a step that locates impact instants
     does not locate again (:mod:`~nsga_jax.integrators.impact_instants`), or
-    ``None`` where the scheme does not locate them.
+    ``None`` where the scheme does not locate them; multipliers: the
+    position correction's and the velocity jump's multipliers of the last
+    step ((m,) each), Newton's start in the next with
+    ``DS(warm_start=True)``, or ``None`` (each sub-problem starts at zero).
     """
 
     t: Scalar
@@ -46,6 +49,7 @@ class StepState(eqx.Module):
     a: Vector
     factorisations: tuple | None = None
     closed: jax.Array | None = None
+    multipliers: tuple[jax.Array, jax.Array] | None = None
 
 
 # ------------------------------------------------------------------- schemes

@@ -91,10 +91,10 @@ class AbstractGenAlpha(AbstractScheme):
         q_pred = state.q + h * state.v + h**2 * (0.5 - co.beta) * state.a + h**2 * co.beta * a_pred
         return a_pred, v_pred, q_pred
 
-    def finalise(self, t, q, v, vd, a_pred, factorisations=None) -> StepState:
+    def finalise(self, t, q, v, vd, a_pred, factorisations=None, multipliers=None) -> StepState:
         """Algorithm 1, line 41: complete the pseudo-acceleration once, (34c) then holds."""
         return StepState(t=t, q=q, v=v, vd=vd, a=a_pred + self.coefficients.a_per_vd() * vd,
-                         factorisations=factorisations)
+                         factorisations=factorisations, multipliers=multipliers)
 
 
 class DS(AbstractGenAlpha):
@@ -123,6 +123,12 @@ class DS(AbstractGenAlpha):
             ``"energetic"``: with friction and e > 0, Newton's jump capped so
             that an impact cannot create energy (Kane's paradox;
             :mod:`~nsga_jax.integrators.impact_law`). Static.
+        warm_start: start each step's position correction and velocity jump
+            from the multipliers the step before converged to, instead of zero
+            (the paper's start). Bodies resting on many redundant frictional
+            contacts then take a few Newton iterations a step instead of tens
+            (docs/friction.md, *Warm start*); the result differs from the
+            paper's within the Newton tolerance. Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
@@ -130,6 +136,7 @@ class DS(AbstractGenAlpha):
     krylov_min_dof: int | None = eqx.field(static=True, default=KRYLOV_MIN_DOF, kw_only=True)
     impact_law: str = eqx.field(static=True, default="newton", kw_only=True)
     impact_instants: bool = eqx.field(static=True, default=False, kw_only=True)
+    warm_start: bool = eqx.field(static=True, default=False, kw_only=True)
     max_impacts: int = eqx.field(static=True, default=4, kw_only=True)
     min_fraction: float = eqx.field(static=True, default=1e-6, kw_only=True)
     late: float = eqx.field(static=True, default=1e-9, kw_only=True)
@@ -176,6 +183,9 @@ class DS(AbstractGenAlpha):
             state = StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
         if state is None:
             state = super().init(model, t0, q0, v0)
+        if self.warm_start and model.n_constraints:  # the first step starts at zero, as without the option
+            zero = projection_start(model, state.q)[1]
+            state = dataclasses.replace(state, multipliers=(zero, zero))
         if self.impact_instants and model.n_unilateral:  # closed at t0: at a round-off gap
             g0 = model.unilateral(state.q)
             state = dataclasses.replace(state, closed=g0 <= open_floor(g0))
@@ -252,7 +262,7 @@ class DS(AbstractGenAlpha):
         sol_p = solve(position_problem, PositionInputs(**step.shared(), smooth=smooth, f_smooth=f_smooth,
                                                        with_forces=self.nonsmooth_forces, q_prev=state.q,
                                                        left_open=left_open),
-                      projection_start(model, qt), self.max_iter, held[1], name="position_correction")
+                      newton_start(model, qt, state, 0), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
         # 3. velocity jump
@@ -260,7 +270,7 @@ class DS(AbstractGenAlpha):
         velocity: VelocityAux
         jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=position.active, f_smooth=f_smooth,
                               G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces)
-        sol_v, W, velocity = velocity_jump(self.impact_law, jump, projection_start(model, qt), self.max_iter,
+        sol_v, W, velocity = velocity_jump(self.impact_law, jump, newton_start(model, qt, state, 1), self.max_iter,
                                            held[2], tol.tol_r)
 
         q, v = qt + U, vt + W
@@ -273,7 +283,18 @@ class DS(AbstractGenAlpha):
             impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
             active_position=position.active, active_velocity=velocity.active, friction=velocity.friction,
         )
-        return self.finalise(t, q, v, vd, a_pred, kept(results, state)), out, (qt, vt)
+        multipliers = None if state.multipliers is None else (sol_p.x[1], sol_v.x[1])
+        return self.finalise(t, q, v, vd, a_pred, kept(results, state), multipliers), out, (qt, vt)
+
+
+def newton_start(model: Model, q: Vector, state: StepState, which: int) -> tuple[Vector, jax.Array]:
+    """Newton's start of the position correction (``which`` 0) or the velocity
+    jump (1): zero corrections, and zero multipliers
+    (:func:`~nsga_jax.integrators.friction.projection_start`, the paper's) or,
+    with ``DS(warm_start=True)``, the multipliers the last step converged to."""
+    if state.multipliers is None:
+        return projection_start(model, q)
+    return jnp.zeros_like(q), state.multipliers[which]
 
 
 def kept(results, state: StepState) -> tuple | None:

@@ -113,6 +113,10 @@ SOLVER_PARAMS: dict[str, Param] = {
     "impacts": Param("end", "where an impact is applied: at the end of the step that holds it, as in the paper "
                      "(end), or at its instant inside the step (instants; ds and dsn only; see docs/scheme.md)",
                      kind="choice", choices=IMPACT_TIMINGS),
+    "newton_start": Param("zero", "Newton's start of each step's position correction and velocity jump: zero "
+                          "multipliers, as in the paper (zero), or the last step's (previous: resting contacts "
+                          "converge in fewer iterations; ds and dsn only; see docs/friction.md)", kind="choice",
+                          choices=("zero", "previous")),
     "record_every": Param(1, "keep every k-th step (and the last) in memory, on disk and in trajectory.npz; "
                           "the statistics cover every step", kind="int", lo=1,
                           hi=1_000_000_000),
@@ -128,6 +132,10 @@ def check_solver(solver: dict[str, Any]) -> None:
     if law != "newton" and solver["scheme"] not in ENERGETIC_SCHEMES:
         raise ConfigError(f"impact_law = {law!r} is carried by the schemes {', '.join(ENERGETIC_SCHEMES)}; "
                           f"scheme = {solver['scheme']!r} imposes Newton's law (impact_law = 'newton')")
+    if solver.get("newton_start", "zero") != "zero" and solver["scheme"] not in ENERGETIC_SCHEMES:
+        raise ConfigError(f"newton_start = {solver['newton_start']!r} is an option of the schemes "
+                          f"{', '.join(ENERGETIC_SCHEMES)}; scheme = {solver['scheme']!r} starts Newton at zero "
+                          "(newton_start = 'zero')")
     if solver.get("impacts", "end") != "end" and solver["scheme"] not in ENERGETIC_SCHEMES:
         raise ConfigError(f"impacts = {solver['impacts']!r} is an option of the schemes "
                           f"{', '.join(ENERGETIC_SCHEMES)}; scheme = {solver['scheme']!r} applies impacts at the end "

@@ -72,7 +72,7 @@ class Scene:
 
 def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
     """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter, impact_law,
-    impacts)."""
+    impacts, newton_start)."""
     from ..integrators import scheme_class
 
     common = dict(tol_r=solver["tol_r"], tol_f=solver["tol_f"], max_iter=solver["max_iter"])
@@ -84,6 +84,8 @@ def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
         common["impact_law"] = solver["impact_law"]
     if solver.get("impacts", "end") == "instants":  # DS, DSn likewise
         common["impact_instants"] = True
+    if solver.get("newton_start", "zero") == "previous":  # DS, DSn likewise
+        common["warm_start"] = True
     return cls(rho_inf=solver["rho_inf"], **common)
 
 
