@@ -160,6 +160,22 @@ def test_cube_matches_the_dense_path_at_the_default_tolerance():
     assert_same_run(krylov, dense, atol=10 * float(scheme.tol_r))
 
 
+def test_cube_warm_started_on_the_matrix_free_path_is_the_same_run():
+    """Newton from the last step's multipliers (``warm_start``) on the
+    Krylov path: the landing cube's run equals the zero-started one to a few
+    tolerances, with the same contacts active, in no more iterations (its
+    sub-problems converge in one iteration from either start)."""
+    scene = cube(2)
+    scheme = dataclasses.replace(scene.scheme(), krylov_min_dof=0)
+    assert scheme.matrix_free(scene.model)
+    args = (0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0)
+    cold = nsga_jax.simulate(scene.model, scheme, *args)
+    warm = nsga_jax.simulate(scene.model, dataclasses.replace(scheme, warm_start=True), *args)
+    assert_same_run(warm, cold, atol=10 * float(scheme.tol_r))
+    for sub in ("position", "velocity"):
+        assert warm.stats["iterations"][sub]["mean"] <= cold.stats["iterations"][sub]["mean"], sub
+
+
 def test_bar_matches_its_tridiagonal_path():
     """The bar on node blocks of width 1 with the diagonal preconditioner
     (no Kronecker mass) against its block elimination, through the impact;
