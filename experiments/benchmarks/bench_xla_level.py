@@ -114,8 +114,9 @@ def main() -> None:
         slower = best[True]["step_us"] - best[False]["step_us"]
         even = f"{saved / slower * 1e6:,.0f}" if slower > 0 and saved > 0 else ("never" if saved <= 0 else "always")
         diff = float(np.max(np.abs(best[False]["q"] - best[True]["q"])))
-        row = (f"| {scene} | {runs[False][0]['n_dof']} | {best[False]['compile_s']:.2f} | {best[True]['compile_s']:.2f} "
-               f"| {best[False]['step_us']:.0f} | {best[True]['step_us']:.0f} | {even} | {diff:.1e} |")
+        default, level0 = best[False], best[True]
+        row = (f"| {scene} | {runs[False][0]['n_dof']} | {default['compile_s']:.2f} | {level0['compile_s']:.2f} "
+               f"| {default['step_us']:.0f} | {level0['step_us']:.0f} | {even} | {diff:.1e} |")
         rows.append(row)
         print(row, flush=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
