@@ -53,13 +53,31 @@ def test_a_pushed_stack_is_the_same_motion_in_fewer_iterations():
     assert abs(warm.q[-1, -3] - cold.q[-1, -3]) < 1e-6  # the top box's x at the end
 
 
+def test_a_sub_problem_that_fails_hands_zero_to_the_next_step():
+    """The next step starts from the multipliers a sub-problem converged to,
+    and from zero (the paper's start) after one that did not converge."""
+    scene = stack(boxes=3, push=0.0)
+    q0, v0 = jnp.asarray(scene.q0), jnp.asarray(scene.v0)
+    for max_iter, converges in ((50, True), (1, False)):  # the first step's correction needs several iterations
+        scheme = nj.DS(warm_start=True, max_iter=max_iter)
+        ops = scheme.prepare(scene.model, jnp.asarray(H), jnp.asarray(0.0))
+        state = scheme.init(scene.model, 0.0, q0, v0)
+        new, out = scheme.step(scene.model, ops, state, jnp.asarray(H))
+        position = new.multipliers[0]
+        assert (int(out.result) == int(nj.Result.successful)) == converges
+        assert bool(jnp.any(position != 0)) == converges  # the stack's weight, or zero after the failure
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("options", [dict(scheme=nj.DSn), dict(impact_instants=True)], ids=["DSn", "instants"])
 def test_with_the_other_scheme_options(options):
+    options = dict(options)  # the parametrized dict is shared: never change it
     scheme = options.pop("scheme", nj.DS)
     cold, warm = both(stack(boxes=2, t_end=0.2), scheme, **options)
     for sol in (cold, warm):
         assert sol.stats["result"] == "successful" and sol.stats["failed_steps"] == 0
+        if options.get("impact_instants"):  # the top box's landing is located: the split steps carry the start
+            assert sol.stats["impacts_at_instants"] >= 1
     np.testing.assert_allclose(warm.q, cold.q, atol=1e-5)
     assert warm.stats["iterations"]["position"]["mean"] <= cold.stats["iterations"]["position"]["mean"]
 

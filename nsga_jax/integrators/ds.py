@@ -283,7 +283,7 @@ class DS(AbstractGenAlpha):
             impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
             active_position=position.active, active_velocity=velocity.active, friction=velocity.friction,
         )
-        multipliers = None if state.multipliers is None else (sol_p.x[1], sol_v.x[1])
+        multipliers = None if state.multipliers is None else (carried(sol_p), carried(sol_v))
         return self.finalise(t, q, v, vd, a_pred, kept(results, state), multipliers), out, (qt, vt)
 
 
@@ -295,6 +295,13 @@ def newton_start(model: Model, q: Vector, state: StepState, which: int) -> tuple
     if state.multipliers is None:
         return projection_start(model, q)
     return jnp.zeros_like(q), state.multipliers[which]
+
+
+def carried(sol) -> jax.Array:
+    """The multipliers a sub-problem hands the next step's start: those it
+    converged to, or zero (the paper's start) where it did not, so that a
+    failed step's iterate (perhaps not finite) never seeds the next."""
+    return jnp.where(sol.converged, sol.x[1], jnp.zeros_like(sol.x[1]))
 
 
 def kept(results, state: StepState) -> tuple | None:
