@@ -125,10 +125,12 @@ class DS(AbstractGenAlpha):
             :mod:`~nsga_jax.integrators.impact_law`). Static.
         warm_start: start each step's position correction and velocity jump
             from the multipliers the step before converged to, instead of zero
-            (the paper's start). Bodies resting on many redundant frictional
-            contacts then take a few Newton iterations a step instead of tens
-            (docs/friction.md, *Warm start*); the result differs from the
-            paper's within the Newton tolerance. Static.
+            (the paper's start; zero again after a sub-problem that did not
+            converge). Contacts whose active set moves from step to step (a
+            stack knocked over) then take several times fewer Newton
+            iterations; bodies at rest do not gain (docs/friction.md, *Warm
+            start*). The result differs from the paper's within the Newton
+            tolerance. Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
