@@ -1,4 +1,5 @@
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ from nsga_jax.process_settings import configure_jax
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them (importing nsga_jax sets neither)
 
 QUICK_COMPILE = "--xla_backend_optimization_level=0"
+TESTS = Path(__file__).resolve().parent
 
 
 def pytest_configure(config):
@@ -285,12 +287,20 @@ def pytest_collection_modifyitems(config, items):
     """Mark the tests named in :data:`LONG` slow and those in
     :data:`OVER_CI_BUDGET` slow and long (every parametrization of a
     function, or one parametrization named with its id), before ``-m``
-    selects."""
+    selects. Where the whole suite is collected, a name that matches no test
+    (renamed, removed, misspelt) stops the run with its name."""
+    matched = set()
     for item in items:
         path, _, rest = item.nodeid.partition("::")
         test = f"{path.split('/')[-1]}::{rest}"
-        if test in LONG or test.split("[")[0] in LONG:
+        names = {test, test.split("[")[0]}
+        if names & LONG:
             item.add_marker(pytest.mark.slow)
-        if test in OVER_CI_BUDGET or test.split("[")[0] in OVER_CI_BUDGET:
+        if names & OVER_CI_BUDGET:
             item.add_marker(pytest.mark.slow)
             item.add_marker(pytest.mark.long)
+        matched |= names
+    whole_suite = all(Path(arg).resolve() == TESTS for arg in config.args)
+    unmatched = sorted((LONG | OVER_CI_BUDGET) - matched)
+    if whole_suite and unmatched:
+        raise pytest.UsageError(f"tests/conftest.py names tests that do not exist: {', '.join(unmatched)}")
