@@ -15,8 +15,6 @@ against the functions, as for any model.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -24,11 +22,11 @@ import jax.numpy as jnp
 from .._custom_types import ConstraintVector, Matrix, Scalar, Vector
 from ..models.base import Model
 from ..results import ConfigError
-from . import layout
+from . import assemble, layout
 from . import matrix_free as large
 from .base import AbstractBody, AbstractContact, AbstractForce, AbstractJoint
 from .forces import Gravity
-from .groups import call, gather, scatter_block, scatter_vector, shift
+from .groups import call, gather, scatter_block, scatter_vector
 
 
 class SystemModel(Model):
@@ -140,16 +138,16 @@ class SystemModel(Model):
         return jnp.concatenate([s[0] for s in states]), jnp.concatenate([s[1] for s in states])
 
     def mass(self, q: Vector) -> Matrix:
-        return _body_matrix(self, lambda b, qb: b.mass(qb), q)
+        return assemble.body_matrix(self, lambda b, qb: b.mass(qb), q)
 
     def mass_product(self, q: Vector, x: Vector) -> Vector:
-        return _body_vector(self, lambda b, qb, xb: b.mass_product(qb, xb), q, x)
+        return assemble.body_vector(self, lambda b, qb, xb: b.mass_product(qb, xb), q, x)
 
     def force(self, q: Vector, v: Vector, t: Scalar) -> Vector:
-        f = _body_vector(self, lambda b, qb, vb: b.internal_force(qb, vb), q, v)
-        for parts in _force_parts(self):
+        f = assemble.body_vector(self, lambda b, qb, vb: b.internal_force(qb, vb), q, v)
+        for parts in assemble.force_parts(self):
             if isinstance(parts, Gravity):
-                f = f + _gravity_vector(self, parts, q.dtype)
+                f = f + assemble.gravity_vector(self, parts, q.dtype)
                 continue
             group, stacked, bodies, _ = parts
 
@@ -162,9 +160,9 @@ class SystemModel(Model):
         return f
 
     def tangents(self, q: Vector, v: Vector, t: Scalar) -> tuple[Matrix, Matrix]:
-        K = _body_matrix(self, lambda b, qb, vb: b.tangents(qb, vb)[0], q, v)
-        C = _body_matrix(self, lambda b, qb, vb: b.tangents(qb, vb)[1], q, v)
-        for parts in _force_parts(self):
+        K = assemble.body_matrix(self, lambda b, qb, vb: b.tangents(qb, vb)[0], q, v)
+        C = assemble.body_matrix(self, lambda b, qb, vb: b.tangents(qb, vb)[1], q, v)
+        for parts in assemble.force_parts(self):
             if isinstance(parts, Gravity):
                 continue
             group, stacked, bodies, member = parts
@@ -186,13 +184,13 @@ class SystemModel(Model):
         return K, C
 
     def bilateral(self, q: Vector) -> ConstraintVector:
-        return _constraint_vector(self, q, "bilateral")
+        return assemble.constraint_vector(self, q, "bilateral")
 
     def unilateral(self, q: Vector) -> ConstraintVector:
-        return _constraint_vector(self, q, "unilateral")
+        return assemble.constraint_vector(self, q, "unilateral")
 
     def constraints(self, q: Vector) -> ConstraintVector:
-        return _constraint_vector(self, q, "all")
+        return assemble.constraint_vector(self, q, "all")
 
     @property
     def restitution(self) -> ConstraintVector:
@@ -241,11 +239,11 @@ class SystemModel(Model):
 
     def constraint_jacobian(self, q: Vector) -> Matrix:
         """g_q (nc, n), assembled from each part's ``jax.jacfwd`` on its own bodies' coordinates."""
-        return _jacobian_rows(self, q, bilateral_only=False)
+        return assemble.jacobian_rows(self, q, bilateral_only=False)
 
     def bilateral_jacobian(self, q: Vector) -> Matrix:
         """g_q^B (nb, n), part by part."""
-        return _jacobian_rows(self, q, bilateral_only=True)
+        return assemble.jacobian_rows(self, q, bilateral_only=True)
 
     def constraint_curvature(self, q: Vector, mu: ConstraintVector) -> Matrix:
         """d(g_q^T mu)/dq (n, n): each nonlinear part's Hessian of ``mu · g`` on its
@@ -291,9 +289,9 @@ class SystemModel(Model):
             (cols,) = group.columns
             energy = energy + jnp.sum(call(group, lambda b, qb, vb: b.kinetic_energy(qb, vb) + b.strain_energy(qb),
                                            stacked, gather(q, cols), gather(v, cols)))
-        for parts in _force_parts(self):
+        for parts in assemble.force_parts(self):
             if isinstance(parts, Gravity):
-                energy = energy - _gravity_vector(self, parts, q.dtype) @ q
+                energy = energy - assemble.gravity_vector(self, parts, q.dtype) @ q
                 continue
             group, stacked, bodies, _ = parts
             (qs,) = layout.slot_coordinates(self, group, q)
@@ -335,67 +333,3 @@ class SystemModel(Model):
                     return slice(start, start + count)
                 start += count
         raise KeyError(f"no {kind[:-1]} called {name!r}")
-
-
-def _body_vector(model: SystemModel, fn: Callable, *xs: Vector) -> Vector:
-    """Per-body vectors (k,) from ``fn(body, *local xs)``, assembled (n,)."""
-    if len(model.bodies) == 1:
-        return fn(model.bodies[0], *xs)
-    out = jnp.zeros((model.n_dof,), xs[0].dtype)
-    for group, stacked in layout.body_groups(model):
-        (cols,) = group.columns
-        out = scatter_vector(out, cols, call(group, fn, stacked, *(gather(x, cols) for x in xs)))
-    return out
-
-
-def _body_matrix(model: SystemModel, fn: Callable, *xs: Vector) -> Matrix:
-    """Per-body matrices (k, k) from ``fn(body, *local xs)``, assembled block diagonal (n, n)."""
-    if len(model.bodies) == 1:
-        return fn(model.bodies[0], *xs)
-    out = jnp.zeros((model.n_dof, model.n_dof), xs[0].dtype)
-    for group, stacked in layout.body_groups(model):
-        (cols,) = group.columns
-        out = scatter_block(out, cols, cols, call(group, fn, stacked, *(gather(x, cols) for x in xs)))
-    return out
-
-
-def _force_parts(model: SystemModel) -> list:
-    """Gravity parts alone (evaluated body group by body group), then the
-    other forces in groups of one kind."""
-    gravity = [f for f in model.forces if isinstance(f, Gravity)]
-    others = tuple(f for f in model.forces if not isinstance(f, Gravity))
-    return [*gravity, *layout.part_groups(model, others)]
-
-
-def _constraint_vector(model: SystemModel, q: Vector, which: str) -> ConstraintVector:
-    """The ``which`` constraints (see :meth:`_row_groups`), assembled."""
-    offset = model.n_bilateral if which == "unilateral" else 0
-    size = {"bilateral": model.n_bilateral, "unilateral": model.n_unilateral}.get(which, model.n_constraints)
-    g = jnp.zeros((size,), q.dtype)
-    for group, module, bodies, fn, _ in layout.row_groups(model, which):
-        rows = shift(group.rows, -offset)
-        (qs,) = layout.slot_coordinates(model, group, q)
-        g = scatter_vector(g, rows, call(group, fn, module, bodies, qs))  # rows disjoint, g from zeros
-    return g
-
-
-def _jacobian_rows(model: SystemModel, q: Vector, bilateral_only: bool) -> Matrix:
-    rows = model.n_bilateral if bilateral_only else model.n_constraints
-    G = jnp.zeros((rows, model.n_dof), q.dtype)
-    for group, module, bodies, fn, _ in layout.row_groups(model, "bilateral" if bilateral_only else "all"):
-        (qs,) = layout.slot_coordinates(model, group, q)
-        blocks = call(group, jax.jacfwd(fn, argnums=2), module, bodies, qs)
-        for cols, block in zip(group.columns, blocks):
-            G = scatter_block(G, group.rows, cols, block)
-    return G
-
-
-def _gravity_vector(model: SystemModel, gravity: Gravity, dtype) -> Vector:
-    """The generalised force (n,) of a gravity part, body group by body group."""
-    f = jnp.zeros((model.n_dof,), dtype)
-    for group, stacked in layout.body_groups(model, gravity.bodies):
-        (cols,) = group.columns
-        f = scatter_vector(f, cols, call(group, lambda b: gravity.on_body(b, dtype), stacked))
-    return f
-
-
