@@ -65,6 +65,8 @@ def constraint_vector(model: SystemModel, q: Vector, which: str) -> ConstraintVe
 
 
 def jacobian_rows(model: SystemModel, q: Vector, bilateral_only: bool) -> Matrix:
+    """The constraint Jacobian g_q, shape (rows, n): the bilateral rows, or
+    every row, each group's blocks by ``jax.jacfwd`` on its bodies' coordinates."""
     rows = model.n_bilateral if bilateral_only else model.n_constraints
     G = jnp.zeros((rows, model.n_dof), q.dtype)
     for group, module, bodies, fn, _ in layout.row_groups(model, "bilateral" if bilateral_only else "all"):
@@ -82,5 +84,3 @@ def gravity_vector(model: SystemModel, gravity: Gravity, dtype) -> Vector:
         (cols,) = group.columns
         f = scatter_vector(f, cols, call(group, lambda b: gravity.on_body(b, dtype), stacked))
     return f
-
-
