@@ -79,7 +79,9 @@ def main() -> None:
                         help="Newton's start of each step's position correction and velocity jump: zero "
                              "multipliers (the paper's) or the last step's; several are interleaved case by case")
     parser.add_argument("--cases", nargs="+", choices=("rest", "push"), default=["rest", "push"],
-                        help="the stack at rest, knocked over, or both (a 3D stack of ten takes about 0.2 s a step)")
+                        help="the stack at rest, knocked over, or both (ten 3D boxes at rest: about 0.15 s a step with "
+                             "two OpenBLAS threads, tens of iterations and far longer with one: "
+                             "docs/friction-scenes.md)")
     parser.add_argument("--out", type=Path, default=Path("experiments/out/bench_stack.md"))
     args = parser.parse_args()
     rows = []
