@@ -5,10 +5,12 @@ describes."""
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from nsga_jax.integrators.contact_law import NormalLaw
+from nsga_jax.integrators.contact_law import NormalLaw, linearised_active
+from nsga_jax.integrators.friction import contact_law
 from nsga_jax.integrators.linalg import Factorisation, solve_bordered
 
 RNG = np.random.default_rng(3)
@@ -54,3 +56,27 @@ def test_the_correction_is_the_bordered_one_and_solves_a_linear_projection():
     active = final.aux[0]
     assert bool(jnp.all(jnp.abs(jnp.where(active, g, 0.0)) < 1e-10))  # active rows closed
     assert bool(jnp.all(jnp.where(UNILATERAL & ~active, g, 0.0) >= -1e-10))  # open rows not penetrated
+
+
+def test_newtons_matrix_closes_the_rows_at_round_off_of_zero_only():
+    """σ = k Λ - p c a round-off below zero (a gap of +1e-18 m between boxes
+    the smooth step moved alike) is closed in Newton's matrix and open in the
+    law; σ well below zero is open in both. The law's values (impulses, rows,
+    active set) are the same whichever derivative is taken, so the residual
+    and the solution do not change."""
+    aug = jnp.array([1.0, -1e-12, -1e-3, 0.0, -1e-12])
+    candidates = jnp.array([True, True, True, True, False])
+    unilateral = jnp.ones(5, bool)
+    np.testing.assert_array_equal(linearised_active(aug, candidates, unilateral), [True, True, False, True, False])
+    np.testing.assert_array_equal(aug >= 0, [True, False, False, True, False])
+    # with friction: two contacts, d = 2; the second at σ_N = -1e-12
+    lam, rate = jnp.array([0.5, 0.0, 0.1, 0.0, 0.2, 0.1]), jnp.array([0.0, 1e-12, 0.0, 0.3, 0.0, 0.0])
+    args = (jnp.ones(2, bool), jnp.ones(2, bool), jnp.array([0.5, 0.5]), (0, 1), 2, 1.0, 1.0, jnp.ones(2))
+    plain, widened = contact_law(lam, rate, *args), contact_law(lam, rate, *args, linearised=True)
+    for a, b in zip(plain, widened):
+        np.testing.assert_array_equal(a, b)
+    assert not bool(plain.active[1])
+    d_plain = jax.jacfwd(lambda x: contact_law(x, rate, *args).impulse)(lam)
+    d_widened = jax.jacfwd(lambda x: contact_law(x, rate, *args, linearised=True).impulse)(lam)
+    assert float(d_plain[1, 1]) == 0.0 and float(d_widened[1, 1]) == 1.0  # dP_N/dΛ_N of the touching contact
+    np.testing.assert_array_equal(d_plain[0], d_widened[0])

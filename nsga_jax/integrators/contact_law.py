@@ -19,6 +19,13 @@ bilateral or σ >= 0 among the candidates, ``G^T σ`` on the active rows
 (:func:`~nsga_jax.integrators.residuals.augmented_residual`) and the
 bordered correction of the active rows
 (:meth:`~nsga_jax.integrators.linalg.AbstractFactorisation.bordered`).
+
+Both laws build Newton's matrix on :func:`linearised_active`, the active set
+widened by round-off: a contact whose σ is zero to within round-off (a box
+resting on another that the smooth step moved by the same amount: the gap
+between them is ±1e-18 m) is linearised as closed whichever sign that
+round-off has. The residual, the converged solution and its implicit
+derivative keep the law as it is.
 """
 
 from __future__ import annotations
@@ -26,11 +33,33 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import jax
+import jax.numpy as jnp
 
 from .._custom_types import Scalar, Vector
 from .linalg import AbstractFactorisation
 from .newton import Residual
 from .residuals import augmented_residual
+
+
+def linearised_active(aug: jax.Array, candidates: Any, unilateral: jax.Array) -> jax.Array:
+    """The rows (bool (nc,)) that Newton's matrix treats as closed: the
+    candidates that are bilateral or have σ = k Λ - p c (``aug``, (nc,))
+    above -√eps times the candidates' largest |σ|.
+
+    The law is active where σ >= 0, and a contact at the edge of
+    complementarity (Λ = 0 and c = 0: the boxes of a stack at rest after
+    the smooth step, which moves them all alike) has σ = ±round-off there.
+    Its sign then chose Newton's path: with the contact open in the matrix,
+    the step that lifts the box below drives the box above into it, and ten
+    3D boxes at rest took 41 position iterations at a step, or one, by the
+    last bits of the gaps (which OpenBLAS's thread count decided). Closed in
+    the matrix, the contact's multiplier is solved with the others and the
+    step converges in one iteration. A contact open by more than the band is
+    linearised as open; one inside it costs at most an iteration if it opens.
+    Only the matrix changes: the law's value, and so the solution, do not."""
+    scale = jnp.max(jnp.where(candidates, jnp.abs(aug), 0.0), initial=0.0)
+    band = jnp.sqrt(jnp.finfo(aug.dtype).eps) * jax.lax.stop_gradient(scale)
+    return candidates & (~unilateral | (aug >= -band))
 
 
 class NormalLaw(NamedTuple):
@@ -61,8 +90,9 @@ class NormalLaw(NamedTuple):
 
     def correction(self, matrix: AbstractFactorisation, r1: Vector, r_c: jax.Array, G_up: jax.Array,
                    G_low: jax.Array, lam: jax.Array, rate: jax.Array, bound: Scalar | None) -> tuple[Vector, jax.Array]:
-        """The bordered correction on the active rows at (lam, rate)."""
-        return matrix.bordered(r1, r_c, G_up, G_low, self.active(lam, rate), self.k, self.p, bound)
+        """The bordered correction on the rows :func:`linearised_active` at (lam, rate)."""
+        active = linearised_active(self.k * lam - self.p * rate, self.candidates, self.unilateral)
+        return matrix.bordered(r1, r_c, G_up, G_low, active, self.k, self.p, bound)
 
 
-__all__ = ["NormalLaw"]
+__all__ = ["NormalLaw", "linearised_active"]

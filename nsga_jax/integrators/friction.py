@@ -48,7 +48,7 @@ from jax import lax
 
 from .._custom_types import Scalar, Vector
 from ..models.base import Model
-from .contact_law import NormalLaw
+from .contact_law import NormalLaw, linearised_active
 from .linalg import AbstractFactorisation, linear_solve, minimum_norm_split, redundancy_shift
 from .newton import Problem, Residual, convergence_bound, where_needed
 
@@ -121,17 +121,28 @@ class LawParts(NamedTuple):
 
 
 def contact_law(lam: jax.Array, rate: jax.Array, candidates, unilateral, mu: jax.Array,
-                normals: tuple[int, ...], d: int, k: Scalar, p: Scalar, p_t: jax.Array) -> LawParts:
+                normals: tuple[int, ...], d: int, k: Scalar, p: Scalar, p_t: jax.Array,
+                linearised: bool = False) -> LawParts:
     """The velocity-level law of every contact row at the multipliers ``lam``
     and rates ``rate`` (both nc + nf·d): eq. 42's normal law (scaling k,
     penalty p) and Alart–Curnier's tangential one (penalty p_t (nf,) per
-    contact, :func:`contact_masses`; module docstring)."""
+    contact, :func:`contact_masses`; module docstring). ``linearised``
+    (static): the same values, with the normal rows' derivatives taken on
+    :func:`~nsga_jax.integrators.contact_law.linearised_active` (Newton's
+    matrix) instead of the active set."""
     nc = unilateral.shape[0]
     lam_n, rate_n = lam[:nc], rate[:nc]
     aug = k * lam_n - p * rate_n
     active = candidates & (~unilateral | (aug >= 0))
-    P_n = jnp.where(active, aug, 0.0)
-    r_n = jnp.where(active, -k * rate_n, -(k**2 / p) * lam_n)
+
+    def normal_law(closed):
+        return jnp.where(closed, aug, 0.0), jnp.where(closed, -k * rate_n, -(k**2 / p) * lam_n)
+
+    P_n, r_n = normal_law(active)
+    if linearised:  # values of the active set, derivatives of the widened one
+        P_lin, r_lin = normal_law(linearised_active(aug, candidates, unilateral))
+        P_n = P_lin + lax.stop_gradient(P_n - P_lin)
+        r_n = r_lin + lax.stop_gradient(r_n - r_lin)
     if rate.shape[0] == nc:
         return LawParts(P_n, r_n, active, aug)
     lam_t, rate_t = lam[nc:].reshape(-1, d), rate[nc:].reshape(-1, d)
@@ -190,9 +201,9 @@ class FrictionLaw(NamedTuple):
         (:data:`RESTART_PENALTIES`)."""
         return self._replace(p_t=jnp.asarray(factor, self.p_t.dtype) * self.p_t)
 
-    def __call__(self, lam: jax.Array, rate: jax.Array) -> LawParts:
+    def __call__(self, lam: jax.Array, rate: jax.Array, linearised: bool = False) -> LawParts:
         return contact_law(lam, rate, self.candidates, self.unilateral, self.mu, self.normals, self.d,
-                           self.k, self.p, self.p_t)
+                           self.k, self.p, self.p_t, linearised)
 
     def residual(self, inertia: Vector, force: Vector, G: jax.Array, rate: jax.Array, lam: jax.Array,
                  tol_r, tol_f) -> Residual:
@@ -231,7 +242,8 @@ class FrictionLaw(NamedTuple):
             B = jnp.concatenate([B, matrix.solve(G_up[B.shape[1]:].T)], axis=1)
         D = G_low @ B
         m = D.shape[0]
-        (P_lam, P_rate), (R_lam, R_rate) = jax.jacfwd(lambda a, b: self(a, b)[:2], argnums=(0, 1))(lam, rate)
+        (P_lam, P_rate), (R_lam, R_rate) = jax.jacfwd(lambda a, b: self(a, b, linearised=True)[:2],
+                                                      argnums=(0, 1))(lam, rate)
         eye = jnp.eye(m, dtype=D.dtype)
         Gy = G_low @ y
         system = jnp.block([[eye - P_rate @ D, -P_lam], [R_rate @ D, R_lam]])
