@@ -32,6 +32,12 @@ CHAIN_REACH = 2.0
 """The most an impact's neighbour can travel in a step, in units of the
 impact's own approach over the step: an impact with e <= 1 gives a body at
 most twice the speed that struck it."""
+SIMULTANEOUS = 1e-3
+"""An open contact whose gap at the step's start is below this fraction of
+the impact's approach over the step closes within that fraction of the step
+after it: the two impacts are simultaneous at the step's resolution (a
+resting corner the position correction left open by 1e-11 m, within its
+tolerance, as the rocking block lands on its other corner)."""
 ENERGETIC_HINT = ('the impact law impact_law = "energetic" (DS, DSn; Python: DS(impact_law="energetic"), '
                   'a config\'s [solver] impact_law, or --impact-law energetic) cannot create energy')
 """What the energy warning offers where friction and e > 0 can cause the rise."""
@@ -182,7 +188,8 @@ class RunTotals:
         (its change over the step before) by less than half its gap, yet within
         :data:`CHAIN_REACH` times the travel over the step of the contacts that
         close by their own motion (a gap that jumps, as a corner's that enters
-        a bounded face, is closed by no impact). The step then resolves in one
+        a bounded face, is closed by no impact) and beyond :data:`SIMULTANEOUS`
+        times it (a contact closer than that touches). The step then resolves in one
         simultaneous impact what happens in sequence (a Newton's cradle whose
         gaps are shorter than a step's travel). Steps marked ``in_sequence``
         (split at their located impact instants, without a fall-back) are
@@ -206,7 +213,7 @@ class RunTotals:
             approach = float(np.max(np.where(hit[i] & ~others, before - start, 0.0), initial=0.0))
             # ... within reach of it: an impact of e <= 1 at most doubles a speed (a gap that jumps, as a
             # corner's that enters a bounded face, closes no impact)
-            chained = others & (start <= CHAIN_REACH * approach)
+            chained = others & (start <= CHAIN_REACH * approach) & (start >= SIMULTANEOUS * approach)
             if chained.any():
                 self.chained_steps += 1
                 if self.first_chain is None:
