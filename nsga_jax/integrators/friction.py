@@ -33,7 +33,9 @@ the Delassus matrix D = G B on all contact rows (normal and tangential),
 
 where P_Λ, P_γ (R_Λ, R_γ) are the derivatives of the impulses P (of the
 contact residual rows r_c) in the multipliers and the rates, taken by
-``jax.jacfwd`` of the local law. The system has 2 (nc + nf · d) unknowns;
+``jax.jacfwd`` of the local law with its normal rows closed on
+:func:`~nsga_jax.integrators.contact_law.linearised_active` (a contact at
+σ_N = ±round-off is linearised as closed whatever the sign). The system has 2 (nc + nf · d) unknowns;
 what the model has no friction for never reaches this module.
 """
 
