@@ -59,18 +59,19 @@ def test_the_correction_is_the_bordered_one_and_solves_a_linear_projection():
 
 
 def test_newtons_matrix_closes_the_rows_at_round_off_of_zero_only():
-    """σ = k Λ - p c a round-off below zero (a gap of +1e-18 m between boxes
-    the smooth step moved alike) is closed in Newton's matrix and open in the
-    law; σ well below zero is open in both. The law's values (impulses, rows,
+    """σ = k Λ - p c a round-off below zero (within 64 eps of the largest
+    |σ|: a gap of +1e-18 m between boxes the smooth step moved alike) is
+    closed in Newton's matrix and open in the law; σ below that (1e-12 of
+    the largest) is open in both. The law's values (impulses, rows,
     active set) are the same whichever derivative is taken, so the residual
     and the solution do not change."""
-    aug = jnp.array([1.0, -1e-12, -1e-3, 0.0, -1e-12])
+    aug = jnp.array([1.0, -1e-15, -1e-12, 0.0, -1e-15])
     candidates = jnp.array([True, True, True, True, False])
     unilateral = jnp.ones(5, bool)
     np.testing.assert_array_equal(linearised_active(aug, candidates, unilateral), [True, True, False, True, False])
     np.testing.assert_array_equal(aug >= 0, [True, False, False, True, False])
-    # with friction: two contacts, d = 2; the second at σ_N = -1e-12
-    lam, rate = jnp.array([0.5, 0.0, 0.1, 0.0, 0.2, 0.1]), jnp.array([0.0, 1e-12, 0.0, 0.3, 0.0, 0.0])
+    # with friction: two contacts, d = 2; the second at σ_N = -1e-15
+    lam, rate = jnp.array([0.5, 0.0, 0.1, 0.0, 0.2, 0.1]), jnp.array([0.0, 1e-15, 0.0, 0.3, 0.0, 0.0])
     args = (jnp.ones(2, bool), jnp.ones(2, bool), jnp.array([0.5, 0.5]), (0, 1), 2, 1.0, 1.0, jnp.ones(2))
     plain, widened = contact_law(lam, rate, *args), contact_law(lam, rate, *args, linearised=True)
     for a, b in zip(plain, widened):

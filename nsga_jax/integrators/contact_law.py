@@ -38,13 +38,14 @@ import jax.numpy as jnp
 from .._custom_types import Scalar, Vector
 from .linalg import AbstractFactorisation
 from .newton import Residual
-from .residuals import augmented_residual
+from .residuals import ROUNDOFF_FACTOR, augmented_residual
 
 
 def linearised_active(aug: jax.Array, candidates: Any, unilateral: jax.Array) -> jax.Array:
     """The rows (bool (nc,)) that Newton's matrix treats as closed: the
     candidates that are bilateral or have σ = k Λ - p c (``aug``, (nc,))
-    above -√eps times the candidates' largest |σ|.
+    above -64 eps times the candidates' largest |σ| (at zero multipliers,
+    the round-off of a gap computed among gaps as large as the largest).
 
     The law is active where σ >= 0, and a contact at the edge of
     complementarity (Λ = 0 and c = 0: the boxes of a stack at rest after
@@ -55,10 +56,13 @@ def linearised_active(aug: jax.Array, candidates: Any, unilateral: jax.Array) ->
     last bits of the gaps (which OpenBLAS's thread count decided). Closed in
     the matrix, the contact's multiplier is solved with the others and the
     step converges in one iteration. A contact open by more than the band is
-    linearised as open; one inside it costs at most an iteration if it opens.
-    Only the matrix changes: the law's value, and so the solution, do not."""
+    linearised as open. The band must stay at round-off: at √eps of the
+    largest |σ| a contact truly open by less than the band was linearised
+    closed, pulled to a tensile multiplier, then open again, and a planar
+    stack of ten boxes knocked over failed a step in that cycle. Only the
+    matrix changes: the law's value, and so the solution, do not."""
     scale = jnp.max(jnp.where(candidates, jnp.abs(aug), 0.0), initial=0.0)
-    band = jnp.sqrt(jnp.finfo(aug.dtype).eps) * jax.lax.stop_gradient(scale)
+    band = ROUNDOFF_FACTOR * jnp.finfo(aug.dtype).eps * jax.lax.stop_gradient(scale)
     return candidates & (~unilateral | (aug >= -band))
 
 
