@@ -5,7 +5,7 @@ Per step, with q_{n+1} = q_n + h (θ v_{n+1} + (1-θ) v_n):
     M(q_{n+1}) (v_{n+1} - v_n) - h (θ f(q_{n+1}, v_{n+1}, t_{n+1}) + (1-θ) f(q_n, v_n, t_n))
         = g_q(q_{n+1})^T Λ,
     bilateral: g_q^B v_{n+1} = 0,
-    unilateral j with a closed predicted gap, g_j(q_n + h/2 v_n) <= its round-off:
+    unilateral j with a closed predicted gap, g_j(q_n + h/2 v_n) <= 0:
         0 <= g_q^j v_{n+1} + e_j g_q^j(q_n) v_n  ⊥  Λ_j >= 0,
 
 solved by the same semi-smooth augmented-Lagrangian Newton as the NSGA
@@ -35,7 +35,7 @@ from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, StepOutput, SubproblemRecord, VelocityAux, make_output, subproblem_result
-from .residuals import Scaling, constraint_floor, gap_roundoff, roundoff_floor
+from .residuals import Scaling, constraint_floor, roundoff_floor
 from .subproblem_inputs import MoreauJeanInputs
 
 
@@ -82,10 +82,9 @@ class MJ(AbstractScheme):
         f_n = model.force(q_n, v_n, state.t)
         candidates = restituted = None
         if model.n_constraints:
-            G_n, q_mid = ops.constraints.jacobian(model, q_n), q_n + 0.5 * h * v_n
-            closing = model.constraints(q_mid) <= gap_roundoff(G_n, q_mid)  # touching to round-off: closed
+            closing = model.constraints(q_n + 0.5 * h * v_n) <= 0.0
             candidates = ~is_unilateral(model) | closing
-            restituted = restitution(model, q_n.dtype) * (G_n @ v_n)
+            restituted = restitution(model, q_n.dtype) * (ops.constraints.jacobian(model, q_n) @ v_n)
         inputs = MoreauJeanInputs(model, ops, tol, t, h, theta=self.theta, q_n=q_n, v_n=v_n, f_n=f_n,
                                   candidates=candidates, restituted=restituted)
         x0 = (v_n, projection_start(model, v_n)[1])

@@ -57,15 +57,6 @@ def constraint_floor(k: Scalar, G: jax.Array, x: Vector) -> Scalar:
     return ROUNDOFF_FACTOR * eps * k * jnp.linalg.norm(abs(G) @ jnp.abs(x))
 
 
-def gap_roundoff(G: jax.Array, q: Vector) -> jax.Array:
-    """``ROUNDOFF_FACTOR * eps * |G| |q|``, row by row (nc,): how far from
-    zero a gap computed at q may be from round-off alone. A contact open by
-    less touches: Moreau–Jean's predicted closed set takes it (a block put on
-    an incline has its corners' gaps a round-off above zero, and with
-    ``g <= 0`` it fell freely for a step, rocked and penetrated)."""
-    return ROUNDOFF_FACTOR * jnp.finfo(q.dtype).eps * (jnp.abs(G) @ jnp.abs(q))
-
-
 def augmented_residual(inertia, force, G, c, mu, k, p, candidates, unilateral, tol_r, tol_f) -> Residual:
     """Residual of a projection sub-problem (eqs. 37 and 42).
 
