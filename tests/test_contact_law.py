@@ -69,7 +69,26 @@ def test_newtons_matrix_closes_the_rows_at_round_off_of_zero_only():
     candidates = jnp.array([True, True, True, True, False])
     unilateral = jnp.ones(5, bool)
     np.testing.assert_array_equal(linearised_active(aug, candidates, unilateral), [True, True, False, True, False])
-    np.testing.assert_array_equal(aug >= 0, [True, False, False, True, False])
+    law = NormalLaw(candidates, unilateral, 1.0, 1.0)
+    np.testing.assert_array_equal(law.active(jnp.zeros(5), -aug), [True, False, False, True, False])
+    # a joint's large reaction (a bilateral row) does not widen the contacts' band: a contact open by
+    # 1e-10 of the contacts' largest |σ| stays open in the matrix
+    joint = jnp.array([1e6, -1e-15, -1.0, -1e-10, -1e-15])
+    np.testing.assert_array_equal(linearised_active(joint, candidates, unilateral.at[0].set(False)),
+                                  [True, True, False, False, False])
+    # NormalLaw's correction is the bordered one of the widened set
+    k = p = 1.0
+    lam, rate = jnp.zeros(NC), jnp.array([-1.0, 1e-15, 1.0, 0.0])
+    normal = NormalLaw(True, UNILATERAL, k, p)
+    res = normal.residual(jnp.zeros(N), jnp.ones(N), G, rate, lam, 1e-12, 1e-12)
+    fac = Factorisation.of(A, jnp.zeros(()), jnp.zeros(()))
+    widened = linearised_active(k * lam - p * rate, True, UNILATERAL)
+    np.testing.assert_array_equal(widened, [True, True, False, True])
+    assert not bool(res.aux[0][1])  # open in the law
+    got = normal.correction(fac, res.r[:N], res.r[N:], G, G, lam, rate, None)
+    expected = solve_bordered(fac, res.r[:N], res.r[N:], G, G, widened, k, p)
+    np.testing.assert_array_equal(got[0], expected[0])
+    np.testing.assert_array_equal(got[1], expected[1])
     # with friction: two contacts, d = 2; the second at σ_N = -1e-15
     lam, rate = jnp.array([0.5, 0.0, 0.1, 0.0, 0.2, 0.1]), jnp.array([0.0, 1e-15, 0.0, 0.3, 0.0, 0.0])
     args = (jnp.ones(2, bool), jnp.ones(2, bool), jnp.array([0.5, 0.5]), (0, 1), 2, 1.0, 1.0, jnp.ones(2))

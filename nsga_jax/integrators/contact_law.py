@@ -24,8 +24,9 @@ Both laws build Newton's matrix on :func:`linearised_active`, the active set
 widened by round-off: a contact whose σ is zero to within round-off (a box
 resting on another that the smooth step moved by the same amount: the gap
 between them is ±1e-18 m) is linearised as closed whichever sign that
-round-off has. The residual, the converged solution and its implicit
-derivative keep the law as it is.
+round-off has. The residual and the converged solution keep the law as it
+is; the implicit derivative, which solves with Newton's matrix, takes the
+closed branch at such a contact (at that kink either branch is valid).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from .residuals import ROUNDOFF_FACTOR, augmented_residual
 def linearised_active(aug: jax.Array, candidates: Any, unilateral: jax.Array) -> jax.Array:
     """The rows (bool (nc,)) that Newton's matrix treats as closed: the
     candidates that are bilateral or have σ = k Λ - p c (``aug``, (nc,))
-    above -64 eps times the candidates' largest |σ| (at zero multipliers,
+    above -64 eps times the unilateral candidates' largest |σ| (at zero multipliers,
     the round-off of a gap computed among gaps as large as the largest).
 
     The law is active where σ >= 0, and a contact at the edge of
@@ -59,10 +60,12 @@ def linearised_active(aug: jax.Array, candidates: Any, unilateral: jax.Array) ->
     linearised as open. The band must stay at round-off: at √eps of the
     largest |σ| a contact truly open by less than the band was linearised
     closed, pulled to a tensile multiplier, then open again, and a planar
-    stack of ten boxes knocked over failed a step in that cycle. Only the
-    matrix changes: the law's value, and so the solution, do not."""
-    scale = jnp.max(jnp.where(candidates, jnp.abs(aug), 0.0), initial=0.0)
-    band = ROUNDOFF_FACTOR * jnp.finfo(aug.dtype).eps * jax.lax.stop_gradient(scale)
+    stack of ten boxes knocked over failed a step in that cycle. The scale
+    is the unilateral candidates' alone: a joint's large reaction must not
+    widen the band of the contacts. Only the matrix changes: the law's value,
+    and so the solution, do not."""
+    scale = jnp.max(jnp.where(candidates & unilateral, jnp.abs(aug), 0.0), initial=0.0)
+    band = ROUNDOFF_FACTOR * jnp.finfo(aug.dtype).eps * scale
     return candidates & (~unilateral | (aug >= -band))
 
 

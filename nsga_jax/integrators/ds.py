@@ -127,8 +127,9 @@ class DS(AbstractGenAlpha):
             from the multipliers the step before converged to, instead of zero
             (the paper's start; zero again after a sub-problem that did not
             converge). Contacts whose active set moves from step to step (a
-            stack knocked over) then take several times fewer Newton
-            iterations; bodies at rest do not gain (docs/friction.md, *Warm
+            stack knocked over) then take fewer Newton iterations (ten
+            planar boxes: 1.05 position iterations a step against 1.91);
+            bodies at rest take one either way (docs/friction.md, *Warm
             start*). The result differs from the paper's within the Newton
             tolerance. Static.
     """
