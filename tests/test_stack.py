@@ -146,13 +146,16 @@ def test_ten_boxes_rest(dim):
 
 
 @pytest.mark.parametrize("restarts", [False, True])
-def test_a_pushed_stack_restarts_the_step_that_cycles(monkeypatch, restarts):
+def test_the_step_that_cycled_converges_without_a_restart(monkeypatch, restarts):
     """Six planar boxes, the top one pushed at 2 m/s, at t = 0.037 s (the
-    state saved from a run): in the next step the velocity jump cycles between
-    a contact's stick and slip branches until the iteration cap. Run again
-    from its start with the tangential penalties rescaled
-    (``RESTART_PENALTIES``: the same solution, another Newton path), it
-    converges, and the record counts every run's iterations."""
+    state saved from a run): the next step's velocity jump cycled between a
+    contact's stick and slip branches until the iteration cap, and only a
+    run from its start with the tangential penalties rescaled
+    (``RESTART_PENALTIES``) converged. With Newton's matrix closing the
+    contacts at σ = ±round-off (``linearised_active``) the first run
+    converges, with or without restarts, in the same iterations: the cycle
+    was a path through those degenerate contacts. (The restarts themselves
+    are tested on their own problems in test_newton.py.)"""
     from nsga_jax.integrators import friction
     from nsga_jax.integrators.base import StepState
 
@@ -163,12 +166,8 @@ def test_a_pushed_stack_restarts_the_step_that_cycles(monkeypatch, restarts):
     model, scheme, h = scene.model, scene.scheme(), scene.solver["h"]
     state = StepState(**{k: jnp.asarray(saved[k]) for k in ("t", "q", "v", "vd", "a")})
     _, out = jax.jit(lambda s: scheme.step(model, scheme.prepare(model, h, 0.0), s, h))(state)
-    cap = scene.solver["max_iter"]
-    velocity = int(out.newton.iterations[2])
-    if restarts:
-        assert int(out.result) == 0 and cap < velocity <= 3 * cap
-    else:
-        assert int(out.result) != 0 and velocity == cap
+    assert int(out.result) == 0
+    assert int(out.newton.iterations[2]) < 10 < scene.solver["max_iter"]
 
 
 @pytest.mark.slow
