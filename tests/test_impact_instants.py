@@ -4,6 +4,7 @@ accumulation, the same run from every driver, gradients through the located
 instant, and refusals by name."""
 
 import math
+import warnings
 
 import jax
 import numpy as np
@@ -263,6 +264,31 @@ def test_newtons_cradle_follows_the_exact_sequence_of_collisions():
             assert not sol.stats["warnings"], sol.stats["warnings"]  # the steps took their collisions in sequence
             np.testing.assert_allclose(np.asarray(sol.v)[-1], v[-1], atol=1e-9)
     assert errors["instants"] < 1e-9 and errors["paper"] > 1e-4, errors
+
+
+def test_a_step_past_its_cap_of_instants_falls_back_and_is_counted():
+    """The cradle of the test above with ``max_impacts = 1``: a step that
+    resolves one collision at its instant takes what is left as one paper
+    step (a fall-back), counted per step in ``records.fallback`` and in
+    ``stats["instant_fallbacks"]``; where the rest of such a step held
+    another collision (step 2: a ball crosses a second gap) the run warns
+    by name that it resolved them at once. With the default cap (4) no
+    step falls back and no warning is raised."""
+    cradle = load_scene("newtons_cradle", {"e": 0.9, "gap": 1.03e-3})
+    runs = {}
+    for cap in (1, 4):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            runs[cap] = nj.simulate(cradle.model, nj.DS(rho_inf=1.0, impact_instants=True, max_impacts=cap),
+                                    0.0, 0.5, 2e-3, cradle.q0, cradle.v0)
+    capped, free = runs[1], runs[4]
+    fell_back = np.asarray(capped.records.fallback)
+    assert capped.stats["failed_steps"] == 0 and capped.stats["instant_fallbacks"] == int(fell_back.sum()) > 0
+    assert np.all(np.asarray(capped.records.instants)[fell_back] == 1)  # the cap, then the paper's step
+    assert capped.stats["impacts_at_instants"] < free.stats["impacts_at_instants"] == 10
+    assert any("impacts in sequence within one step" in w and "first step 2 " in w
+               for w in capped.stats["warnings"]), capped.stats["warnings"]
+    assert free.stats["instant_fallbacks"] == 0 and not free.stats["warnings"]
 
 
 def test_matrix_free_cube_locates_its_landing_as_the_dense_path():
