@@ -18,7 +18,7 @@ from .first_step import check_limit
 from .integrators.base import AbstractScheme
 from .models.base import Model
 from .models.redundancy import RedundantConstraintsWarning, bilateral_redundancy, conflict
-from .precision import DTYPES, require_x64_for
+from .precision import DTYPES, precision_notes, require_x64_for
 from .results import ConfigError
 from .validation import (
     IMPACT_LAWS,
@@ -151,7 +151,8 @@ class RunInputs(NamedTuple):
     v0: np.ndarray
     """Initial velocities, (n,) float64."""
     notes: list[str]
-    """The redundancy report (:func:`redundancy_notes`), kept in each run's warnings."""
+    """The redundancy report (:func:`redundancy_notes`) and the precision's
+    (:func:`~nsga_jax.precision.precision_notes`), kept in each run's warnings."""
 
 
 def check_run_inputs(driver: str, model, scheme, t0, t1, q0, v0, *, dtype, observables=None,
@@ -164,7 +165,8 @@ def check_run_inputs(driver: str, model, scheme, t0, t1, q0, v0, *, dtype, obser
     the initial state (sizes, finite, joints satisfied, contacts not
     penetrated), ``observables`` a function or ``None`` and
     ``first_step_limit`` a number or ``None``. Redundant bilateral
-    constraints are warned about once, here. Raises :class:`TypeError` for a
+    constraints, and what float32 cannot give the model, are warned about
+    once, here. Raises :class:`TypeError` for a
     wrong Python type and :class:`~nsga_jax.ConfigError` for a bad value."""
     steps = {"h": h} if hs is None else {"hs": hs}
     refuse_traced(driver, model=model, scheme=scheme, t0=t0, t1=t1, **steps, q0=q0, v0=v0)
@@ -184,5 +186,6 @@ def check_run_inputs(driver: str, model, scheme, t0, t1, q0, v0, *, dtype, obser
     if observables is not None and not callable(observables):
         raise TypeError(f"observables must be a function or None, got {type(observables).__name__}")
     notes = redundancy_notes(model, q0, stacklevel=4)  # at the caller of simulate / simulate_batch
+    notes += precision_notes(model, dtype, stacklevel=4)
     return RunInputs(dtype, grids[0][0], grids[0][1], np.array([g[2] for g in grids]),
                      np.array([g[3] for g in grids]), q0, v0, notes)

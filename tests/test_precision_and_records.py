@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -70,6 +71,31 @@ def test_float32_run_converges_and_follows_float64(name, overrides, tol=1e-4):
     scale = np.abs(ref.q).max()
     assert np.abs(sol.q - ref.q).max() < tol * scale
     assert sol.observables["energy"].dtype == np.float64  # observables are evaluated in float64
+
+
+def test_float32_with_friction_is_warned_by_name():
+    """A sticking contact creeps in float32 (the position correction accepts a
+    slip of the gaps' round-off a step: three boxes at rest move 0.6 mm in
+    1 s, docs/accuracy.md): a float32 run of a frictional model is warned
+    (``PrecisionWarning``) before it runs, by simulate and by integrate when
+    it is traced, and the warning is kept in the run's warnings; a
+    frictionless or float64 run is not."""
+    import jax
+
+    from nsga_jax.precision import cast_floats, precision_notes
+
+    stack = load_scene("box_stack", {"dim": 2, "n_boxes": 2, "t_end": 0.002})
+    with pytest.warns(nj.PrecisionWarning, match="float32 with Coulomb friction: a sticking contact may creep"):
+        sol = stack.run(dtype="float32")
+    assert any(w.startswith("float32 with Coulomb friction") for w in sol.stats["warnings"])
+    model, scheme = cast_floats((stack.model, stack.scheme()), "float32")
+    with pytest.warns(nj.PrecisionWarning, match="float32 with Coulomb friction"):
+        jax.eval_shape(lambda q, v: nj.integrate(model, scheme, 0.0, 0.002, 1e-3, q, v, n_steps=2),
+                       np.asarray(stack.q0, np.float32), np.asarray(stack.v0, np.float32))
+    frictionless = load_scene("box_stack", {"dim": 2, "n_boxes": 2, "mu": 0.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", nj.PrecisionWarning)
+        assert precision_notes(stack.model, "float64") == precision_notes(frictionless.model, "float32") == []
 
 
 def _float64_values(jaxpr) -> list[str]:
