@@ -73,7 +73,8 @@ def _run(args) -> int:
     failure = None
     saveat = SaveAt(every=s["record_every"], chunks=Path(out) / "partial")  # kept steps on disk as the run goes
     try:
-        with one_line_warnings(RedundantConstraintsWarning, InvariantWarning, PrecisionWarning):  # printed below, from sol.warnings
+        # printed below, from sol.warnings
+        with one_line_warnings(RedundantConstraintsWarning, InvariantWarning, PrecisionWarning):
             sol = scene.run(throw=not args.no_throw, progress=not args.quiet, chunk_size=args.chunk, saveat=saveat,
                             strict=args.strict, first_step_limit=args.first_step_limit)
     except (ConvergenceError, InvariantError) as err:
