@@ -43,7 +43,7 @@ from .integrators.base import AbstractScheme
 from .integrators.records import StepOutput, output_template
 from .memory import check_fits
 from .models.base import Model
-from .precision import precision_notes, require_x64_for_inputs
+from .precision import precision_notes, refuse_mixed_precision, require_x64_for_inputs
 from .results import RESULTS, ConfigError, from_code
 from .run_inputs import check_scheme
 from .saveat import HOST_ONLY, SaveAt, refuse
@@ -166,6 +166,7 @@ def integrate(
     require_x64_for_inputs(q0=q0, v0=v0)  # float64 NumPy inputs are not rounded to float32 silently
     dtype = jnp.result_type(*(jnp.asarray(x) for x in (q0, v0)), float)  # the precision of q0 and v0
     precision_notes(model, np.dtype(dtype).name)  # warned once, at trace time
+    refuse_mixed_precision(model, scheme, np.dtype(dtype).name)
     check_fits(model, scheme, dtype.itemsize)  # the dense matrices of one run (static sizes; a vmap's are not seen)
     check_first_step(model, scheme, np.dtype(dtype).name, limit=first_step_limit)
     t0 = jnp.asarray(t0, dtype)

@@ -87,6 +87,23 @@ def precision_notes(model, dtype: str, stacklevel: int = 3) -> list[str]:
     return [FLOAT32_FRICTION]
 
 
+def refuse_mixed_precision(model, scheme, dtype: str) -> None:
+    """Refuse float32 states with a model or scheme whose floating-point
+    parameters are float64 (``integrate`` takes all three as given; the
+    step would mix the two precisions and fail inside its loop), naming the
+    first such parameter and the cast that fixes it."""
+    if dtype != "float32":
+        return
+    for owner, tree in (("model", model), ("scheme", scheme)):
+        leaves = jax.tree_util.tree_leaves_with_path(tree)
+        for path, leaf in leaves:
+            if eqx.is_inexact_array(leaf) and leaf.dtype == jnp.float64:
+                raise ConfigError(f"q0 and v0 are float32 but the {owner}'s parameter "
+                                  f"{owner}{jax.tree_util.keystr(path)} is float64: cast both with "
+                                  f'nsga_jax.precision.cast_floats((model, scheme), "float32"), or run '
+                                  f'simulate(..., dtype="float32"), which casts them')
+
+
 _Tree = TypeVar("_Tree")
 
 

@@ -98,6 +98,25 @@ def test_float32_with_friction_is_warned_by_name():
         assert precision_notes(stack.model, "float64") == precision_notes(frictionless.model, "float32") == []
 
 
+def test_integrate_refuses_float32_states_with_a_float64_model_by_name():
+    """integrate takes the model and scheme as given: float32 q0 and v0 with
+    float64 parameters would mix precisions inside the loop (a raw TypeError
+    of the scan); refused before tracing, naming the parameter and the cast."""
+    from nsga_jax.precision import cast_floats
+
+    ball = load_scene("bouncing_ball")
+    q0, v0 = np.asarray(ball.q0, np.float32), np.asarray(ball.v0, np.float32)
+    with pytest.raises(nj.ConfigError, match=r"q0 and v0 are float32 but the model's parameter model\.\w+.* "
+                                             r"is float64: cast both with nsga_jax\.precision\.cast_floats"):
+        nj.integrate(ball.model, ball.scheme(), 0.0, 0.01, 1e-3, q0, v0)
+    model = cast_floats(ball.model, "float32")
+    with pytest.raises(nj.ConfigError, match=r"the scheme's parameter scheme\.\w+"):
+        nj.integrate(model, ball.scheme(), 0.0, 0.01, 1e-3, q0, v0)
+    model, scheme = cast_floats((ball.model, ball.scheme()), "float32")
+    sol = nj.integrate(model, scheme, 0.0, 0.01, 1e-3, q0, v0)
+    assert sol.q.dtype == np.float32
+
+
 def _float64_values(jaxpr) -> list[str]:
     """The equations of ``jaxpr`` (and of the jaxprs nested in it) that make a
     float64 value, and its float64 constants; weakly typed values (Python
