@@ -165,8 +165,8 @@ def integrate(
     refuse_without_implicit_adjoint(scheme)
     require_x64_for_inputs(q0=q0, v0=v0)  # float64 NumPy inputs are not rounded to float32 silently
     dtype = jnp.result_type(*(jnp.asarray(x) for x in (q0, v0)), float)  # the precision of q0 and v0
-    precision_notes(model, np.dtype(dtype).name)  # warned once, at trace time
     refuse_mixed_precision(model, scheme, np.dtype(dtype).name)
+    precision_notes(model, np.dtype(dtype).name)  # warned once, at trace time
     check_fits(model, scheme, dtype.itemsize)  # the dense matrices of one run (static sizes; a vmap's are not seen)
     check_first_step(model, scheme, np.dtype(dtype).name, limit=first_step_limit)
     t0 = jnp.asarray(t0, dtype)
