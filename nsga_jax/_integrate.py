@@ -45,7 +45,7 @@ from .memory import check_fits
 from .models.base import Model
 from .precision import precision_notes, refuse_mixed_precision, require_x64_for_inputs
 from .results import RESULTS, ConfigError, from_code
-from .run_inputs import check_scheme
+from .run_inputs import check_scheme, check_scheme_for_model
 from .saveat import HOST_ONLY, SaveAt, refuse
 from .solution import Solution, first_failed_code, traced_stats
 from .validation import check_model_fields, describe, integer, require_instance, time_grid
@@ -157,6 +157,7 @@ def integrate(
     require_instance("adjoint", adjoint, AbstractAdjoint, ADJOINT_KINDS)
     require_instance("model", model, Model, "a model instance (a subclass of nsga_jax.Model)")
     check_model_fields(model)  # concrete fields only: traced ones are checked where they were made
+    check_scheme_for_model(scheme, model)
     for name, x in (("q0", q0), ("v0", v0)):
         if isinstance(x, (str, bytes)) or x is None:
             raise TypeError(f"{name} must be an array of {model.n_dof} numbers, got {describe(x)}")

@@ -67,10 +67,13 @@ def closing_contacts(model: Model, G: jax.Array, state: StepState, out: StepOutp
     """Unilateral contacts (nu,) that close during the step: active in the step's
     velocity problem, not active in the previous step's (``was_active``), and
     approaching at t_n. The gap at t_n may be negative (Moreau–Jean penetrates
-    before it detects)."""
+    before it detects). A contact the step's smooth motion held
+    (``DS(persistent_contacts=True)``: closed and not separating at t_n) is
+    not closing."""
     nb = model.n_bilateral
     gdot = G[nb:] @ state.v
-    return out.active_velocity[nb:] & ~was_active & (gdot < 0)
+    closing = out.active_velocity[nb:] & ~was_active & (gdot < 0)
+    return closing if state.persistent is None else closing & ~state.persistent[nb:]
 
 
 def initially_active(model: Model, q0: Vector) -> jax.Array:

@@ -22,6 +22,7 @@ from .precision import DTYPES, precision_notes, require_x64_for
 from .results import ConfigError
 from .validation import (
     IMPACT_LAWS,
+    WARM_WITH_PERSISTENT,
     check_model_fields,
     choice,
     describe,
@@ -56,8 +57,11 @@ def check_scheme(scheme) -> None:
         real("min_fraction", scheme.min_fraction, 0.0, 0.5, lo_open=True, hi_open=True)
         real("late", scheme.late, 0.0, scheme.min_fraction, hi_open=True,
              note="a fraction of h, below min_fraction")
-    if hasattr(scheme, "warm_start") and not isinstance(scheme.warm_start, (bool, np.bool_)):
-        raise ConfigError(f"warm_start must be True or False, got {describe(scheme.warm_start)}")
+    for flag in ("warm_start", "persistent_contacts"):
+        if hasattr(scheme, flag) and not isinstance(getattr(scheme, flag), (bool, np.bool_)):
+            raise ConfigError(f"{flag} must be True or False, got {describe(getattr(scheme, flag))}")
+    if getattr(scheme, "warm_start", False) and getattr(scheme, "persistent_contacts", False):
+        raise ConfigError(WARM_WITH_PERSISTENT)
     settings = {"tol_r": (scheme.tol_r, 0.0, math.inf), "tol_f": (scheme.tol_f, 0.0, math.inf), **scheme.bounds()}
     for name, (value, lo, hi) in settings.items():
         if isinstance(value, jax.core.Tracer):
@@ -67,6 +71,18 @@ def check_scheme(scheme) -> None:
             real(name, x, 0.0, lo_open=True)
         elif not (math.isfinite(x) and lo <= x <= hi):
             raise ConfigError(f"{name} must be in [{lo:g}, {hi:g}], got {x}")
+
+
+def check_scheme_for_model(scheme, model) -> None:
+    """What a scheme's options cannot do with this model, refused by name:
+    ``DS(persistent_contacts=True)`` on a run that would assemble no matrix
+    (:meth:`~nsga_jax.DS.matrix_free`), whose smooth motion carries the
+    bilateral rows only."""
+    if getattr(scheme, "persistent_contacts", False) and model.n_unilateral and scheme.matrix_free(model):
+        raise ConfigError(
+            f"persistent_contacts=True runs on assembled matrices; this model ({model.n_dof} coordinates) "
+            f"takes the matrix-free path (krylov_min_dof = {scheme.krylov_min_dof}): set krylov_min_dof=None "
+            "to run it assembled, or persistent_contacts=False")
 
 
 def state_vector(name: str, value: Any, n: int) -> np.ndarray:
@@ -172,6 +188,7 @@ def check_run_inputs(driver: str, model, scheme, t0, t1, q0, v0, *, dtype, obser
     refuse_traced(driver, model=model, scheme=scheme, t0=t0, t1=t1, **steps, q0=q0, v0=v0)
     check_scheme(scheme)
     check_model_instance(model)
+    check_scheme_for_model(scheme, model)
     dtype = choice("dtype", dtype, DTYPES)
     require_x64_for(dtype)
     if hs is not None:

@@ -169,7 +169,16 @@ def time_grid(t0: Any, t1: Any, h: Any, dtype: str = "float64", *, t1_name: str 
     return t0, t1, h, n_steps
 
 
+WARM_WITH_PERSISTENT = (  # refused by run_inputs.check_scheme and the scenes' check_solver
+    "warm_start=True (newton_start = 'previous') is refused with persistent_contacts=True (persistent_contacts = "
+    "'smooth'): the smooth motion then carries the resting contacts, the position correction and velocity jump "
+    "take 0 or 1 iteration a step without a warm start, and the multipliers a held contact hands on (the drift "
+    "of the smooth motion's rows) are no start for a landing (the rocking block failed a step at h = 2e-3 s); "
+    "choose one")
+
+
 __all__ = ["ENERGETIC_SCHEMES", "IMPACT_LAWS", "MAX_STEPS", "POSITIVE", "SCHEME_NAMES", "UNIT_INTERVAL", "Range",
+           "WARM_WITH_PERSISTENT",
            "check_model_fields", "choice", "describe", "integer", "interval_text", "real", "refuse_traced",
            "require_instance", "step_count", "time_grid"]
 

@@ -10,9 +10,12 @@ landing is seen at the record after it: up to one step), printed as a
 Markdown table.
 
     python experiments/benchmarks/bench_settling.py [--t-end 60] [--h 1e-3 2e-3 4e-3] [--mu 1.0] [--impacts end]
+        [--persistent-contacts jumps]
 
 ``--impacts instants`` runs DS with its impacts located inside their steps
-(docs/impact-instants.md) instead of the paper's step.
+(docs/impact-instants.md) instead of the paper's step;
+``--persistent-contacts smooth`` carries the closed contacts' forces in the
+smooth motion (docs/friction.md, *Persistent contacts in the smooth motion*).
 """
 
 from __future__ import annotations
@@ -40,8 +43,9 @@ def landings(theta: np.ndarray) -> np.ndarray:
     return nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]
 
 
-def measure(h: float, t_end: float, mu: float, impacts: str = "end") -> str:
-    scene = load_scene("rocking_block", {"h": h, "t_end": t_end, "mu": mu, "impacts": impacts})
+def measure(h: float, t_end: float, mu: float, impacts: str = "end", contacts: str = "jumps") -> str:
+    scene = load_scene("rocking_block", {"h": h, "t_end": t_end, "mu": mu, "impacts": impacts,
+                                         "persistent_contacts": contacts})
     sol = scene.run(throw=False)
     q, ts = np.asarray(sol.q), np.asarray(sol.ts)
     last = ts >= ts[-1] - 10.0
@@ -54,7 +58,7 @@ def measure(h: float, t_end: float, mu: float, impacts: str = "end") -> str:
     measured = ts[landings(np.asarray(sol.observables["theta"]))]
     n = min(len(measured), len(resolvable))  # the record after a landing: up to one step late
     timing = float(np.abs(measured[:n] - resolvable[:n]).max())
-    return (f"| {h:g} | {impacts} | {mu:g} | {t_end:g} | {sol.stats['failed_steps']} | "
+    return (f"| {h:g} | {impacts} | {contacts} | {mu:g} | {t_end:g} | {sol.stats['failed_steps']} | "
             f"{its['mean']:.4f} / {its['max']} | {float(q[-1, 2]):.1e} | {drift:.1e} | "
             f"{float(energy.max() / energy[0] - 1):.1e} | {len(measured)} (last {measured[-1]:.3f} s) | "
             f"{int(np.sum(measured <= resolvable[-1]))} | {len(resolvable)} (to {resolvable[-1]:.3f} s) | "
@@ -67,13 +71,15 @@ def main() -> None:
     parser.add_argument("--h", type=float, nargs="+", default=[1e-3, 2e-3, 4e-3])
     parser.add_argument("--mu", type=float, default=1.0)
     parser.add_argument("--impacts", choices=("end", "instants"), default="end")
+    parser.add_argument("--persistent-contacts", choices=("jumps", "smooth"), default="jumps")
     args = parser.parse_args()
-    print("| h [s] | impacts at | mu | t_end [s] | failed steps | position its. mean / max | final tilt [rad] | "
+    print("| h [s] | impacts at | persistent contacts in | mu | t_end [s] | failed steps | "
+          "position its. mean / max | final tilt [rad] | "
           "drift, last 10 s [m] | energy above start (rel.) | impacts | of them, to the last resolvable | "
           "exact, resolvable | impact times: max error [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for h in args.h:
-        print(measure(h, args.t_end, args.mu, args.impacts), flush=True)
+        print(measure(h, args.t_end, args.mu, args.impacts, args.persistent_contacts), flush=True)
 
 
 if __name__ == "__main__":

@@ -39,7 +39,10 @@ class StepState(eqx.Module):
     ``None`` where the scheme does not locate them; multipliers: the
     position correction's and the velocity jump's multipliers of the last
     step ((m,) each), Newton's start in the next with
-    ``DS(warm_start=True)``, or ``None`` (each sub-problem starts at zero).
+    ``DS(warm_start=True)``, or ``None`` (each sub-problem starts at zero);
+    persistent (nc,) bool: the unilateral contacts the next step's smooth
+    motion holds (``DS(persistent_contacts=True)``,
+    :mod:`~nsga_jax.integrators.persistent_contacts`), or ``None``.
     """
 
     t: Scalar
@@ -50,6 +53,7 @@ class StepState(eqx.Module):
     factorisations: tuple | None = None
     closed: jax.Array | None = None
     multipliers: tuple[jax.Array, jax.Array] | None = None
+    persistent: jax.Array | None = None
 
 
 # ------------------------------------------------------------------- schemes

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 from .._custom_types import Scalar, ScalarLike, Vector
 from .._util import as_float
 from ..models.base import Model
+from . import persistent_contacts
 from .base import (
     AbstractScheme,
     StepState,
@@ -132,6 +133,14 @@ class DS(AbstractGenAlpha):
             bodies at rest take one either way (docs/friction.md, *Warm
             start*). The result differs from the paper's within the Newton
             tolerance. Static.
+        persistent_contacts: the smooth motion also carries the unilateral
+            contacts that were closed at the end of the last step, their
+            forces (and, with friction, stick or slip) in the smooth
+            acceleration (:mod:`~nsga_jax.integrators.persistent_contacts`):
+            a body resting, sliding or turning about a sticking corner then
+            moves at second order; the paper (``False``) leaves their forces
+            to the position correction and the velocity jump, at first
+            order. Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
@@ -140,6 +149,7 @@ class DS(AbstractGenAlpha):
     impact_law: str = eqx.field(static=True, default="newton", kw_only=True)
     impact_instants: bool = eqx.field(static=True, default=False, kw_only=True)
     warm_start: bool = eqx.field(static=True, default=False, kw_only=True)
+    persistent_contacts: bool = eqx.field(static=True, default=False, kw_only=True)
     max_impacts: int = eqx.field(static=True, default=4, kw_only=True)
     min_fraction: float = eqx.field(static=True, default=1e-6, kw_only=True)
     late: float = eqx.field(static=True, default=1e-9, kw_only=True)
@@ -156,7 +166,13 @@ class DS(AbstractGenAlpha):
         coordinates, refactored at every iteration in smaller ones."""
         return matrix_kinds(model, needs_constant_G=(True, True, False), enabled=self.fast_paths,
                             hold=model.n_dof >= self.reuse_min_dof, krylov=self.matrix_free(model),
-                            holds_stiffness=(True, self.nonsmooth_forces, False))
+                            holds_stiffness=(True, self.nonsmooth_forces, False),
+                            smooth_contacts=self.holds_contacts(model))
+
+    def holds_contacts(self, model: Model) -> bool:
+        """Whether the smooth motion carries held contacts (static):
+        ``persistent_contacts`` and a model with unilateral contacts."""
+        return self.persistent_contacts and model.n_unilateral > 0
 
     def matrix_free(self, model: Model) -> bool:
         """Whether a run of ``model`` assembles no matrix (static): fast paths,
@@ -192,6 +208,13 @@ class DS(AbstractGenAlpha):
         if self.impact_instants and model.n_unilateral:  # closed at t0: at a round-off gap
             g0 = model.unilateral(state.q)
             state = dataclasses.replace(state, closed=g0 <= open_floor(g0))
+        if self.holds_contacts(model):  # held from t0: the contacts closed there (a round-off gap),
+            # and an initial acceleration with them held (a frictional one sticking, a pulling one let go)
+            g0 = model.unilateral(state.q)
+            held = persistent_contacts.not_separating(model, state.q, state.v, jnp.concatenate(
+                [jnp.zeros((model.n_bilateral,), bool), g0 <= open_floor(g0)]))
+            vd0 = persistent_contacts.held_acceleration(model, state.q, state.v, state.t, held)
+            state = dataclasses.replace(state, vd=vd0, a=vd0, persistent=held)
         reused = self.reused(model)
         if not any(reused):
             return state
@@ -209,7 +232,7 @@ class DS(AbstractGenAlpha):
             (lambda M, K, C: c_vd * M + C + c_q * K,  # eq. 50, S_t^{s*}
              (lambda M, K, C: M + h**2 * K) if with_forces else (lambda M, K, C: M),  # S_t^{p*}
              (lambda M, K, C: M + h * C) if with_forces else (lambda M, K, C: M)),  # S_t^{v*}
-            enabled=self.fast_paths, tol_r=self.tol_r,
+            enabled=self.fast_paths, tol_r=self.tol_r, smooth_contacts=self.holds_contacts(model),
         )
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
@@ -228,7 +251,7 @@ class DS(AbstractGenAlpha):
         velocity jump's iteration matrix is M (h = 0 in S_t^{v*})."""
         mass = lambda M, K, C: M  # noqa: E731
         return prepare_operators(model, t, self.matrix_kinds(model), (mass, mass, mass), enabled=self.fast_paths,
-                                 tol_r=self.tol_r)
+                                 tol_r=self.tol_r, smooth_contacts=self.holds_contacts(model))
 
     def paper_step(self, model: Model, ops: Operators, state: StepState, h: Scalar,
                    left_open: jax.Array | None = None) -> tuple[StepState, StepOutput, tuple[Vector, Vector]]:
@@ -251,9 +274,16 @@ class DS(AbstractGenAlpha):
         # 1. smooth motion
         co = self.coefficients
         step = StepInputs(model, ops, tol, t, h)  # what every sub-problem is given
-        sol_s = solve(smooth_problem, SmoothInputs(**step.shared(), co=co, q_pred=q_pred, v_pred=v_pred),
-                      smooth_start(v_pred, model.n_bilateral), self.max_iter, held[0], name="smooth_motion")
-        smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
+        holds = self.holds_contacts(model)
+        smooth_inputs = SmoothInputs(**step.shared(), co=co, q_pred=q_pred, v_pred=v_pred,
+                                     held=state.persistent if holds else None)
+        if holds:
+            sol_s = persistent_contacts.smooth_solve(smooth_inputs, v_pred, self.max_iter, held[0])
+            smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux.aug[:model.n_bilateral])
+        else:
+            sol_s = solve(smooth_problem, smooth_inputs, smooth_start(v_pred, model.n_bilateral), self.max_iter,
+                          held[0], name="smooth_motion")
+            smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux)
         qt, vt, vd = smooth.q, smooth.v, smooth.vd
         if model.n_constraints == 0:  # nothing to project: U = W = 0 exactly
             newton = NewtonRecord.of(self.subproblems, {"smooth": SubproblemRecord.of(sol_s)}, qt.dtype)
@@ -262,9 +292,13 @@ class DS(AbstractGenAlpha):
 
         f_smooth = force_at(model, qt, vt, t) if self.nonsmooth_forces else None
         # 2. position correction (never sees W)
+        pinned = stuck = None
+        if holds:
+            assert state.persistent is not None  # init gives a state with held contacts their set
+            pinned, stuck = persistent_contacts.pinned_and_stuck(model, sol_s.aux)
         sol_p = solve(position_problem, PositionInputs(**step.shared(), smooth=smooth, f_smooth=f_smooth,
                                                        with_forces=self.nonsmooth_forces, q_prev=state.q,
-                                                       left_open=left_open),
+                                                       left_open=left_open, pinned=pinned, stuck=stuck),
                       newton_start(model, qt, state, 0), self.max_iter, held[1], name="position_correction")
         U, _ = sol_p.x
         position: PositionAux = sol_p.aux
@@ -272,22 +306,32 @@ class DS(AbstractGenAlpha):
         G_prev_v_prev = ops.constraints.jacobian(model, state.q) @ state.v
         velocity: VelocityAux
         jump = VelocityInputs(**step.shared(), smooth=smooth, U=U, candidates=position.active, f_smooth=f_smooth,
-                              G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces)
+                              G_prev_v_prev=G_prev_v_prev, with_forces=self.nonsmooth_forces, pinned=pinned,
+                              stuck=stuck)
         sol_v, W, velocity = velocity_jump(self.impact_law, jump, newton_start(model, qt, state, 1), self.max_iter,
                                            held[2], tol.tol_r)
 
         q, v = qt + U, vt + W
+        impulse = jnp.where(velocity.active, velocity.multiplier, 0.0)
+        friction = velocity.friction
+        if holds:
+            impulse, friction = persistent_contacts.held_impulses(h, sol_s.aux, impulse, friction, model)
         results = [sol_s, sol_p, sol_v]
         solved = dict(zip(self.subproblems, results))
         newton = NewtonRecord.of(self.subproblems, {k: SubproblemRecord.of(r) for k, r in solved.items()}, q.dtype)
         out = make_output(
             model, t, q, v, smooth.lam, newton, first_failure([subproblem_result(k, r) for k, r in solved.items()]),
             nu=jnp.where(position.active, position.multiplier, 0.0),
-            impulse=jnp.where(velocity.active, velocity.multiplier, 0.0), g=position.gap, gdot=velocity.rate,
-            active_position=position.active, active_velocity=velocity.active, friction=velocity.friction,
+            impulse=impulse, g=position.gap, gdot=velocity.rate,
+            active_position=position.active, active_velocity=velocity.active, friction=friction,
         )
         multipliers = None if state.multipliers is None else (carried(sol_p), carried(sol_v))
-        return self.finalise(t, q, v, vd, a_pred, kept(results, state), multipliers), out, (qt, vt)
+        new = self.finalise(t, q, v, vd, a_pred, kept(results, state), multipliers)
+        if holds:  # a smooth motion that did not converge hands on no held contact
+            rate = ops.constraints.jacobian(model, q) @ v
+            persistent = persistent_contacts.held_after(model, sol_s.aux, velocity, rate, q, h)
+            new = dataclasses.replace(new, persistent=persistent & sol_s.converged)
+        return new, out, (qt, vt)
 
 
 def newton_start(model: Model, q: Vector, state: StepState, which: int) -> tuple[Vector, jax.Array]:

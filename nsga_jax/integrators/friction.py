@@ -124,14 +124,19 @@ class LawParts(NamedTuple):
 
 def contact_law(lam: jax.Array, rate: jax.Array, candidates, unilateral, mu: jax.Array,
                 normals: tuple[int, ...], d: int, k: Scalar, p: Scalar, p_t: jax.Array,
-                linearised: bool = False) -> LawParts:
+                linearised: bool = False, stuck: jax.Array | None = None) -> LawParts:
     """The velocity-level law of every contact row at the multipliers ``lam``
     and rates ``rate`` (both nc + nf·d): eq. 42's normal law (scaling k,
     penalty p) and Alart–Curnier's tangential one (penalty p_t (nf,) per
     contact, :func:`contact_masses`; module docstring). ``linearised``
     (static): the same values, with the normal rows' derivatives taken on
     :func:`~nsga_jax.integrators.contact_law.linearised_active` (Newton's
-    matrix) instead of the active set."""
+    matrix) instead of the active set. ``stuck`` (nf,) bool, or ``None``:
+    contacts held sticking whatever their normal multiplier (P_T = σ_T: no
+    slip), the position correction's contacts that the smooth motion held
+    sticking (:mod:`~nsga_jax.integrators.persistent_contacts`). A contact
+    whose normal row is marked bilateral there (pinned) may pull: its disk's
+    radius is μ max(P_N, 0)."""
     nc = unilateral.shape[0]
     lam_n, rate_n = lam[:nc], rate[:nc]
     aug = k * lam_n - p * rate_n
@@ -148,7 +153,11 @@ def contact_law(lam: jax.Array, rate: jax.Array, candidates, unilateral, mu: jax
     if rate.shape[0] == nc:
         return LawParts(P_n, r_n, active, aug)
     lam_t, rate_t = lam[nc:].reshape(-1, d), rate[nc:].reshape(-1, d)
-    P_t = disk_projection(k * lam_t - p_t[:, None] * rate_t, mu * P_n[jnp.asarray(normals)])
+    sigma_t = k * lam_t - p_t[:, None] * rate_t
+    P_normal, open_ = P_n[jnp.asarray(normals)], unilateral[jnp.asarray(normals)]
+    P_t = disk_projection(sigma_t, mu * jnp.where(open_, P_normal, jnp.maximum(P_normal, 0.0)))
+    if stuck is not None:
+        P_t = jnp.where(stuck[:, None], sigma_t, P_t)
     r_t = -(k / p_t[:, None]) * (k * lam_t - P_t)
     return LawParts(jnp.concatenate([P_n, P_t.ravel()]), jnp.concatenate([r_n, r_t.ravel()]), active, aug)
 
@@ -178,6 +187,7 @@ class FrictionLaw(NamedTuple):
     k: Scalar
     p: Scalar
     p_t: jax.Array
+    stuck: jax.Array | None = None
 
     @property
     def damped(self) -> bool:
@@ -205,7 +215,7 @@ class FrictionLaw(NamedTuple):
 
     def __call__(self, lam: jax.Array, rate: jax.Array, linearised: bool = False) -> LawParts:
         return contact_law(lam, rate, self.candidates, self.unilateral, self.mu, self.normals, self.d,
-                           self.k, self.p, self.p_t, linearised)
+                           self.k, self.p, self.p_t, linearised, self.stuck)
 
     def residual(self, inertia: Vector, force: Vector, G: jax.Array, rate: jax.Array, lam: jax.Array,
                  tol_r, tol_f) -> Residual:
@@ -339,6 +349,8 @@ class FrictionLaw(NamedTuple):
         b, e = sigma_and_radius(d_lam, d_rate)
         active = self(lam, rate).active[normals]
         sticking = active & (c > 0) & (jnp.sum(a**2, axis=1) < c**2)
+        if self.stuck is not None:  # held sticking: no edge to reach
+            sticking = sticking & ~self.stuck
         qa = jnp.sum(b**2, axis=1) - e**2
         qb = 2.0 * (jnp.sum(a * b, axis=1) - c * e)
         qc = jnp.sum(a**2, axis=1) - c**2

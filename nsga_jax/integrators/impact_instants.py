@@ -198,8 +198,14 @@ def restart_after_impact(scheme: DS, model: Model, state: StepState, impact: jax
     carry an O(1) error into the next steps' velocities, a first-order error
     in the run (docs/scheme.md, *Impacts at their instants*)."""
     fresh = scheme.init(model, state.t, state.q, state.v)
-    return eqx.tree_at(lambda s: (s.vd, s.a), state, (jnp.where(impact, fresh.vd, state.vd),
-                                                      jnp.where(impact, fresh.a, state.a)))
+    state = eqx.tree_at(lambda s: (s.vd, s.a), state, (jnp.where(impact, fresh.vd, state.vd),
+                                                       jnp.where(impact, fresh.a, state.a)))
+    if state.persistent is None:
+        return state
+    # ... and the contacts the smooth motion holds from there: those closed and not separating
+    # (DS(persistent_contacts=True), :mod:`~nsga_jax.integrators.persistent_contacts`)
+    assert fresh.persistent is not None
+    return eqx.tree_at(lambda s: s.persistent, state, jnp.where(impact, fresh.persistent, state.persistent))
 
 
 def impact_jump(scheme: DS, model: Model, state: StepState, before: StepOutput,

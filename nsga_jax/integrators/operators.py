@@ -97,7 +97,8 @@ def banded(model: Model) -> bool:
 def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
                  present: tuple[bool, bool, bool] = (True, True, True), enabled: bool = True,
                  hold: bool = False, krylov: bool = False,
-                 holds_stiffness: tuple[bool, bool, bool] = (True, True, False)) -> MatrixKinds:
+                 holds_stiffness: tuple[bool, bool, bool] = (True, True, False),
+                 smooth_contacts: bool = False) -> MatrixKinds:
     """The kinds of the smooth, position and velocity iteration matrices,
     from the model's static structure alone (no array is evaluated).
 
@@ -112,6 +113,8 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
     iterations and steps when ``hold``. ``present``: the scheme has
     that sub-problem (the position and velocity ones only with constraints).
     ``enabled=False`` (the generic path) refactors everything.
+    ``smooth_contacts``: the smooth sub-problem has every constraint row
+    (:mod:`~nsga_jax.integrators.persistent_contacts`), not the bilateral ones only.
 
     ``krylov`` (a :attr:`~nsga_jax.models.Model.matrix_free` model only):
     no matrix is assembled (:mod:`~nsga_jax.integrators.krylov`); a block is
@@ -121,7 +124,8 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
     """
     nb, nc = model.n_bilateral, model.n_constraints
     present = (present[0], present[1] and nc > 0, present[2] and nc > 0)
-    needs = (needs_constant_G[0] and nb > 0, needs_constant_G[1], needs_constant_G[2])
+    smooth_rows = nc if smooth_contacts else nb
+    needs = (needs_constant_G[0] and smooth_rows > 0, needs_constant_G[1], needs_constant_G[2])
     constant_G = model.linear_constraints and nc > 0
     linear = enabled and model.constant_mass and model.linear_force
     tridiagonal = banded(model) and model.bandwidth == 1
@@ -141,7 +145,7 @@ def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
             return ConstantInverse
         return Held if (is_present and enabled and hold) else Refactored
 
-    return kind(present[0], needs[0], nb), kind(present[1], needs[1], nc), kind(present[2], needs[2], nc)
+    return kind(present[0], needs[0], smooth_rows), kind(present[1], needs[1], nc), kind(present[2], needs[2], nc)
 
 
 def generic_operators() -> Operators:
@@ -152,14 +156,16 @@ def generic_operators() -> Operators:
 
 def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
                       top_lefts: tuple[TopLeft | None, TopLeft | None, TopLeft | None],
-                      enabled: bool = True, tol_r: ScalarLike | None = None) -> Operators:
+                      enabled: bool = True, tol_r: ScalarLike | None = None,
+                      smooth_contacts: bool = False) -> Operators:
     """Evaluate what the model's structure makes constant (M, K and C, g_q,
     their bands) and factorise the iteration matrices that ``kinds`` (from
     :func:`matrix_kinds`) say are constant, from their ``top_lefts``
     (smooth, position, velocity; ``None`` for a sub-problem the scheme does
     not have). The smooth block couples only to the bilateral rows of g_q,
     the others to all rows, and the velocity one, with friction, to the
-    tangential rows g_T too. ``enabled=False``: :func:`generic_operators`.
+    tangential rows g_T too (and so does the smooth one with ``smooth_contacts``,
+    :mod:`~nsga_jax.integrators.persistent_contacts`). ``enabled=False``: :func:`generic_operators`.
     Kinds that are never assembled (:mod:`~nsga_jax.integrators.krylov`,
     solving to eq. 51's ``tol_r``) get :func:`matrix_free_operators`.
     """
@@ -208,7 +214,8 @@ def prepare_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
 
     smooth, position, velocity = (build(kind, top_left, rows, tangential)
                                   for kind, top_left, rows, tangential
-                                  in zip(kinds, top_lefts, (nb, nc, nc), (False, False, True)))
+                                  in zip(kinds, top_lefts, (nc if smooth_contacts else nb, nc, nc),
+                                         (smooth_contacts, False, True)))
     return Operators(mass=mass, force=force, constraints=constraints,
                      smooth=smooth, position=position, velocity=velocity)
 

@@ -77,6 +77,10 @@ class SmoothInputs(StepInputs):
     """Predicted velocities (n,)."""
     offset: tuple[Vector, Vector] | None = None
     """CS only: the corrections (U, W), so that forces are evaluated at the total motion."""
+    held: jax.Array | None = None
+    """(nc,) bool, or ``None`` (the paper's smooth motion): the unilateral
+    contacts the smooth motion carries as candidate rows
+    (``DS(persistent_contacts=True)``, :mod:`~nsga_jax.integrators.persistent_contacts`)."""
 
 
 class PositionInputs(StepInputs):
@@ -93,6 +97,14 @@ class PositionInputs(StepInputs):
     """(nc,) bool, or ``None``: rows the correction never activates, the
     contacts a sub-step leaves open up to their located impact instant
     (:mod:`~nsga_jax.integrators.impact_instants`)."""
+    pinned: jax.Array | None = None
+    """(nc,) bool, or ``None``: contacts the smooth motion held with a pushing
+    force, projected here on a zero gap as joints are (their ν of either
+    sign: the drift of the smooth motion's velocity-level rows, both ways),
+    :mod:`~nsga_jax.integrators.persistent_contacts`."""
+    stuck: jax.Array | None = None
+    """(nf,) bool, or ``None``: the pinned frictional contacts the smooth
+    motion held sticking, projected here on a zero slip over the step."""
 
 
 class VelocityInputs(StepInputs):
@@ -109,6 +121,10 @@ class VelocityInputs(StepInputs):
     """g_{q,n} v_n (nc,), the constraint rates at the start of the step (Newton's restitution)."""
     with_forces: bool = eqx.field(static=True)
     """Whether the h f* term (8) is kept (DS) or dropped (DSn, CS; eq. 31a)."""
+    pinned: jax.Array | None = None
+    """(nc,) bool, or ``None``: as :attr:`PositionInputs.pinned`, on ġ."""
+    stuck: jax.Array | None = None
+    """(nf,) bool, or ``None``: as :attr:`PositionInputs.stuck`, on the slip velocity."""
 
 
 class MoreauJeanInputs(StepInputs):

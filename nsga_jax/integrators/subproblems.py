@@ -140,6 +140,8 @@ def position_problem(inputs: PositionInputs) -> Problem:
     n, nb = model.n_dof, model.n_bilateral
     kp = pp = Scaling.of(model, h).kp
     unilateral = is_unilateral(model)
+    if inputs.pinned is not None:  # held by the smooth motion: a zero gap, both ways
+        unilateral = unilateral & ~inputs.pinned
     candidates = True if inputs.left_open is None else ~inputs.left_open
     law: NormalLaw | FrictionLaw = NormalLaw(candidates, unilateral, kp, pp)
     GT = None
@@ -148,6 +150,7 @@ def position_problem(inputs: PositionInputs) -> Problem:
         # the slip over the step by the midpoint rule: exact to O(|q̃ - q_n|³) on a turning body
         GT = model.tangent_jacobian(0.5 * (q_prev + smooth.q))
         law = FrictionLaw.of(model, candidates, unilateral, kp, pp, None, GT)  # tangential penalty pp, as the normal
+        law = law._replace(stuck=inputs.stuck)
     curved_joints = bool(with_forces and nb and not ops.constraints.is_constant)  # g_q^B changes with q
     GB_smooth = ops.constraints.bilateral(model, smooth.q) if curved_joints else None
 
@@ -229,6 +232,8 @@ def velocity_problem(inputs: VelocityInputs) -> Problem:
     n, nb = model.n_dof, model.n_bilateral
     kv = pv = Scaling.of(model, h).kv
     unilateral = is_unilateral(model)
+    if inputs.pinned is not None:  # held by the smooth motion: ġ = 0, both ways
+        unilateral = unilateral & ~inputs.pinned
     q = smooth.q + U
     G = ops.constraints.jacobian(model, q)
     restituted = restitution(model, q.dtype) * G_prev_v_prev
@@ -237,7 +242,7 @@ def velocity_problem(inputs: VelocityInputs) -> Problem:
         G = velocity_rows(model, q, G)
         restituted = jnp.concatenate([restituted, jnp.zeros((G.shape[0] - restituted.shape[0],), q.dtype)])
         law = FrictionLaw.of(model, candidates, unilateral, kv, pv, jnp.diagonal(ops.mass.matrix(model, q)),
-                             G[model.n_constraints:])
+                             G[model.n_constraints:])._replace(stuck=inputs.stuck)
     f_const = None
     if with_forces:
         # terms of f* (eq. 8) that W does not change: (g_q^T - g̃_q^T) λ̃ - (M(q) - M(q̃)) v̇̃

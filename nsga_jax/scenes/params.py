@@ -12,7 +12,15 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..results import ConfigError
-from ..validation import ENERGETIC_SCHEMES, IMPACT_LAWS, IMPACT_TIMINGS, SCHEME_NAMES, Range, time_grid
+from ..validation import (
+    ENERGETIC_SCHEMES,
+    IMPACT_LAWS,
+    IMPACT_TIMINGS,
+    SCHEME_NAMES,
+    WARM_WITH_PERSISTENT,
+    Range,
+    time_grid,
+)
 
 
 @dataclass(frozen=True)
@@ -117,6 +125,11 @@ SOLVER_PARAMS: dict[str, Param] = {
                           "multipliers, as in the paper (zero), or the last step's (previous: resting contacts "
                           "converge in fewer iterations; ds and dsn only; see docs/friction.md)", kind="choice",
                           choices=("zero", "previous")),
+    "persistent_contacts": Param("jumps", "where the force of a contact that stays closed from step to step is "
+                                 "integrated: in the position correction and the velocity jump, at first order, as "
+                                 "in the paper (jumps), or in the smooth motion, at second order (smooth: resting, "
+                                 "sliding and rocking bodies keep their energy; ds and dsn only; see "
+                                 "docs/friction.md)", kind="choice", choices=("jumps", "smooth")),
     "record_every": Param(1, "keep every k-th step (and the last) in memory, on disk and in trajectory.npz; "
                           "the statistics cover every step", kind="int", lo=1,
                           hi=1_000_000_000),
@@ -136,6 +149,12 @@ def check_solver(solver: dict[str, Any]) -> None:
         raise ConfigError(f"newton_start = {solver['newton_start']!r} is an option of the schemes "
                           f"{', '.join(ENERGETIC_SCHEMES)}; scheme = {solver['scheme']!r} starts Newton at zero "
                           "(newton_start = 'zero')")
+    if solver.get("persistent_contacts", "jumps") != "jumps" and solver["scheme"] not in ENERGETIC_SCHEMES:
+        raise ConfigError(f"persistent_contacts = {solver['persistent_contacts']!r} is an option of the schemes "
+                          f"{', '.join(ENERGETIC_SCHEMES)}; scheme = {solver['scheme']!r} integrates contact forces "
+                          "in its jumps (persistent_contacts = 'jumps')")
+    if solver.get("persistent_contacts", "jumps") != "jumps" and solver.get("newton_start", "zero") != "zero":
+        raise ConfigError(WARM_WITH_PERSISTENT)
     if solver.get("impacts", "end") != "end" and solver["scheme"] not in ENERGETIC_SCHEMES:
         raise ConfigError(f"impacts = {solver['impacts']!r} is an option of the schemes "
                           f"{', '.join(ENERGETIC_SCHEMES)}; scheme = {solver['scheme']!r} applies impacts at the end "

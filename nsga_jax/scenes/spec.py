@@ -72,7 +72,7 @@ class Scene:
 
 def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
     """A scheme from validated solver settings (scheme, rho_inf, theta, tol_r, tol_f, max_iter, impact_law,
-    impacts, newton_start)."""
+    impacts, newton_start, persistent_contacts)."""
     from ..integrators import scheme_class
 
     common = dict(tol_r=solver["tol_r"], tol_f=solver["tol_f"], max_iter=solver["max_iter"])
@@ -86,6 +86,8 @@ def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
         common["impact_instants"] = True
     if solver.get("newton_start", "zero") == "previous":  # DS, DSn likewise
         common["warm_start"] = True
+    if solver.get("persistent_contacts", "jumps") == "smooth":  # DS, DSn likewise
+        common["persistent_contacts"] = True
     return cls(rho_inf=solver["rho_inf"], **common)
 
 
