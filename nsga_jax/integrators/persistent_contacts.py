@@ -205,14 +205,14 @@ def held_after(model: Model, smooth: HeldAux, velocity: VelocityAux, rate: jax.A
     jump (a contact that closed in it) or held by this step's smooth motion
     with a pushing force, unless the step ends with them separating: their
     rate ``rate`` = g_q v (nc,) at the step's end above the round-off of a
-    gap over one step, 64 eps (|g_q| |q|) / h. A contact that separates is
-    a ball bouncing off (e > 0) or an impact's other side (the rocking
-    block's old pivot once the new corner has landed): held, it made the
-    next step start from an acceleration with the block pinned on both
-    corners, and the rocking never died out. The cut must stay at
-    round-off: with the jump's tolerance added (tol_r |g_q| |v|, 3e-7 m/s
-    on the late rocking), the slowly separating pivots of the last, small
-    swings were held again, and the block rocked on at 1e-4 rad."""
+    gap over one step, 64 eps (|g_q| |q|) / h. A contact that separates (a
+    ball bouncing off, e > 0; an impact's other side, the rocking block's
+    old pivot once the new corner has landed) is not held: its smooth law
+    would let it go, but held, its landing within the next step would not
+    count as an impact (:func:`smooth_solve`). The cut stays at round-off:
+    the pivots of the rocking block's last, small swings separate slowly.
+    Measured without the cut (h = 2e-3 s, 4 s): the block still came to
+    rest, at 2.6e-12 rad against 2.5e-14 with it."""
     unilateral = is_unilateral(model)
     G = smooth.jacobian[:model.n_constraints]
     separating = rate > ROUNDOFF_FACTOR * jnp.finfo(q.dtype).eps * (jnp.abs(G) @ jnp.abs(q)) / h
