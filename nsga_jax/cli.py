@@ -68,6 +68,8 @@ def _run(args) -> int:
         setting = f"theta = {s['theta']:g}" if s["scheme"] == "mj" else f"rho_inf = {s['rho_inf']:g}"
         law = f", impact_law = {s['impact_law']}" if s["impact_law"] != "newton" else ""
         law += ", impacts at their instants" if s["impacts"] == "instants" else ""
+        law += ", persistent contacts in the smooth motion" if s.get("persistent_contacts") == "smooth" else ""
+        law += ", newton_start = previous" if s.get("newton_start") == "previous" else ""
         print(f"{scene.name}: {s['scheme'].upper()} h = {s['h']:g} s, t_end = {s['t_end']:g} s, "
               f"{setting}, {s['dtype']}{law}; output in {out}", file=sys.stderr)
     failure = None
