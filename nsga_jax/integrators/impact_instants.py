@@ -82,30 +82,27 @@ def open_floor(gaps: jax.Array) -> jax.Array:
     return 1e3 * eps * jnp.maximum(jnp.max(jnp.abs(gaps), initial=0.0), 1.0)
 
 
-def held_acceleration(model: Model, state: StepState) -> Vector:
-    """The acceleration v̇ (n,) [m/s²] at the state with the bilateral
-    constraints and the contacts closed there (``state.closed``) held at
-    acceleration level, a frictional one sticking: the motion until the
-    next contact closes, as an event-driven integrator takes it. The smooth
-    acceleration v̇̃ leaves out the contact forces (they lie in the position
-    correction and the velocity jump): along it a block turning about a
-    resting corner falls freely, its other corner's instant O(s²) off.
-    A held contact whose multiplier pulls (λ < 0) is released and the
-    acceleration taken again without it."""
-    assert state.closed is not None, "held_acceleration needs the closed contacts"
-    q, v, t = state.q, state.v, state.t
-    nb, nc = model.n_bilateral, model.n_constraints
-    held = jnp.concatenate([jnp.ones((nb,), bool), state.closed])
-    normal = jnp.arange(nc) >= nb
-
-    def rate(x):  # the rates of the rows the motion may hold: g_q v and, with friction, g_T v
+def contact_rows(model: Model, q: Vector, v: Vector) -> tuple[jax.Array, jax.Array]:
+    """The rows a motion may hold at (q, v): g_q (nc, n) and, with friction,
+    g_T (nf · d, n) below them; and their convective terms (d(rows v)/dq) v."""
+    def rate(x):  # the rows' rates at fixed v
         rows = jax.jacfwd(model.constraints)(x)
         return rows @ v if model.n_friction == 0 else jnp.concatenate([rows, model.tangent_jacobian(x)]) @ v
 
     rows = jax.jacfwd(model.constraints)(q)
     if model.n_friction:
         rows = jnp.concatenate([rows, model.tangent_jacobian(q)])
-    conv = jax.jvp(rate, (q,), (v,))[1]
+    return rows, jax.jvp(rate, (q,), (v,))[1]
+
+
+def sticking_acceleration(model: Model, q: Vector, v: Vector, t: Scalar, held: jax.Array) -> Vector:
+    """The acceleration v̇ (n,) [m/s²] at (q, v, t) with the rows ``held``
+    (nc,) bool (the bilateral ones among them) at acceleration level, a
+    frictional contact sticking; a held contact whose multiplier pulls
+    (λ < 0) is released and the acceleration taken again without it."""
+    nc = model.n_constraints
+    normal = jnp.arange(nc) >= model.n_bilateral
+    rows, conv = contact_rows(model, q, v)
     M, f = model.mass(q), model.force(q, v, t)
 
     def solve(held):
@@ -115,6 +112,20 @@ def held_acceleration(model: Model, state: StepState) -> Vector:
 
     _, lam = solve(held)
     return solve(held & ~(normal & (lam[:nc] < 0.0)))[0]
+
+
+def held_acceleration(model: Model, state: StepState) -> Vector:
+    """The acceleration v̇ (n,) [m/s²] at the state with the bilateral
+    constraints and the contacts closed there (``state.closed``) held at
+    acceleration level, a frictional one sticking (:func:`sticking_acceleration`):
+    the motion until the next contact closes, as an event-driven integrator
+    takes it. The smooth acceleration v̇̃ leaves out the contact forces (they
+    lie in the position correction and the velocity jump): along it a block
+    turning about a resting corner falls freely, its other corner's instant
+    O(s²) off."""
+    assert state.closed is not None, "held_acceleration needs the closed contacts"
+    held = jnp.concatenate([jnp.ones((model.n_bilateral,), bool), state.closed])
+    return sticking_acceleration(model, state.q, state.v, state.t, held)
 
 
 def taylor_path(state: StepState, s: Scalar, acceleration: Vector | None = None) -> Vector:
@@ -325,5 +336,5 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     return lax.cond(located[0], split, lambda _: (with_closed(model, new, taken), taken), state)
 
 
-__all__ = ["first_instant", "hermite_path", "open_contacts", "open_floor", "restart_after_impact", "split_step",
-           "taylor_path", "with_closed"]
+__all__ = ["contact_rows", "first_instant", "held_acceleration", "hermite_path", "open_contacts", "open_floor",
+           "restart_after_impact", "split_step", "sticking_acceleration", "taylor_path", "with_closed"]

@@ -53,6 +53,7 @@ from .._custom_types import Vector
 from ..models.base import Model
 from .contact_law import NormalLaw
 from .friction import FrictionLaw, has_friction, restarted, velocity_rows
+from .impact_instants import contact_rows, sticking_acceleration
 from .linalg import saddle_acceleration
 from .model_terms import convective, curvature, is_unilateral
 from .newton import NewtonResult, Problem, solve
@@ -247,26 +248,13 @@ def held_acceleration(model: Model, q: Vector, v: Vector, t, held: jax.Array) ->
     (a pivot moving from corner to corner) was tried and dropped: the
     flexible appendage's beam, whose tip rests on its stop for a few steps,
     gained 5 % of its energy at the step that released it."""
-    nc = model.n_constraints
     normal = is_unilateral(model)
-    rows = jax.jacfwd(model.constraints)(q)
-    d = model.friction_dim
-    if has_friction(model):
-        rows = jnp.concatenate([rows, model.tangent_jacobian(q)])
-
-    def rate(x):  # the rows' rates at fixed v: their convective term is its derivative along v
-        G = jax.jacfwd(model.constraints)(x)
-        return (G if not has_friction(model) else jnp.concatenate([G, model.tangent_jacobian(x)])) @ v
-
-    conv = jax.jvp(rate, (q,), (v,))[1]
-    M, f = model.mass(q), model.force(q, v, t)
     held = held | ~normal
     if not has_friction(model):
-        def held_rows(mask, force):
-            return saddle_acceleration(M, force, jnp.where(mask[:, None], rows, 0.0), jnp.where(mask, conv, 0.0))
-
-        _, lam = held_rows(held, f)
-        return held_rows(held & ~(normal & (lam < 0.0)), f)[0]
+        return sticking_acceleration(model, q, v, t, held)
+    nc, d = model.n_constraints, model.friction_dim
+    rows, conv = contact_rows(model, q, v)
+    M, f = model.mass(q), model.force(q, v, t)
     normals = jnp.asarray(model.friction_normals)
     mu = jnp.asarray(model.friction_coefficients, q.dtype)
     slip = (rows[nc:] @ v).reshape(-1, d)
