@@ -157,3 +157,12 @@ def test_the_gradient_through_a_rocking_swing_is_the_finite_difference(adjoint):
     gradient = float(jax.grad(theta)(0.0))
     fd = float((theta(1e-6) - theta(-1e-6)) / 2e-6)
     assert np.isfinite(gradient) and abs(gradient - fd) < 1e-3 * abs(fd)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "persistent_contacts does not always settle: at tilt 0.1 and h = 2e-3 s the rocking block ends in a "
+    "cycle of small swings (|theta| 1.2e-5 rad at 3 s and at 10 s; docs/friction.md, *Persistent contacts in "
+    "the smooth motion*), where the paper's step comes to rest"))
+def test_the_rocking_block_comes_to_rest_from_a_smaller_tilt():
+    _, sol = _rocking(2e-3, 3.0, "smooth", tilt=0.1)
+    assert abs(float(np.asarray(sol.observables["theta"])[-1])) < 1e-12

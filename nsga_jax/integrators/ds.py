@@ -140,7 +140,8 @@ class DS(AbstractGenAlpha):
             a body resting, sliding or turning about a sticking corner then
             moves at second order; the paper (``False``) leaves their forces
             to the position correction and the velocity jump, at first
-            order. Static.
+            order. Not yet robust: the rocking block's last small swings
+            never die out at some tilts and steps (docs/friction.md). Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
