@@ -303,40 +303,48 @@ class FrictionLaw(NamedTuple):
 
     def first_slip(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
                    bound: Scalar) -> jax.Array:
-        """The step τ along ±(d_lam, d_rate) from the law at (lam, rate) to
-        the nearest point where the active set can change (:meth:`first_event`
-        each way; 0 where there is none), signed: of the two, the one where
-        the law's rows are the smaller (the nearer one alone let a corner
-        slide the wrong way, leaving the inconsistency). A null direction's sign is
-        arbitrary (an SVD's): with the events ahead only, a block landing flat
-        with a high μ had its corners pushed apart until one slid, and Newton
-        cycled between the branches of that corner's disk."""
-        ahead = self.first_event(lam, rate, d_lam, d_rate, bound)
-        back = self.first_event(lam, rate, -d_lam, -d_rate, bound)
-        ahead, back = (jnp.where(jnp.isfinite(x), x, 0.0) for x in (ahead, back))
-        smaller = self.rows_along(lam, rate, d_lam, d_rate, -back) < self.rows_along(lam, rate, d_lam, d_rate, ahead)
-        return jnp.where(smaller, -back, ahead)
+        """The step τ (signed) along the null direction ±(d_lam, d_rate) from the
+        law at (lam, rate) to the event where the law's rows are the smallest
+        (:meth:`events`; 0 where there is none). A null direction's sign is
+        arbitrary (an SVD's), so both ways count: with the events ahead only,
+        a block landing flat with a high μ had its corners pushed apart until
+        one slid, and Newton cycled between the branches of that corner's
+        disk; with only the nearest event each way (a sticking contact
+        reaching its edge), a block landing flat on a corner that carries
+        almost nothing (its disk 20 times smaller than the other's) had its
+        other corner pushed to the edge of its disk, where the light corner's
+        multiplier, outside its own disk, was left outside: the position
+        correction cycled at its cap (rocking block, h = 4e-3 s, tilt 0.05);
+        the event where the light corner's multiplier reaches its edge is the
+        solution's active set."""
+        taus = self.events(lam, rate, d_lam, d_rate, bound)
+        rows = jax.vmap(lambda tau: self.rows_along(lam, rate, d_lam, d_rate, tau))(jnp.where(jnp.isfinite(taus),
+                                                                                             taus, 0.0))
+        rows = jnp.where(jnp.isfinite(taus), rows, jnp.inf)
+        best = jnp.argmin(rows)
+        return jnp.where(jnp.isfinite(rows[best]), taus[best], 0.0)
 
     def rows_along(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
                    tau: Scalar) -> jax.Array:
         """The norm of the law's residual rows at (lam + τ d_lam, rate + τ d_rate)."""
         return jnp.linalg.norm(self(lam + tau * d_lam, rate + tau * d_rate).rows)
 
-    def first_event(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
-                    bound: Scalar) -> jax.Array:
-        """The least τ >= 0 at which a sticking contact of the law at
-        (lam + τ d_lam, rate + τ d_rate) reaches the edge of its disk,
-        |σ_T,j(τ)| = μ_j P_N,j(τ), or an active contact's normal impulse
-        reaches zero, times 1 + :data:`SLIP_MARGIN` (∞ when none does), or
-        less past it where the law's rows would grow there by more than
+    def events(self, lam: jax.Array, rate: jax.Array, d_lam: jax.Array, d_rate: jax.Array,
+               bound: Scalar) -> jax.Array:
+        """The steps τ (2 nf + nc,), signed, ∞ where there is none, at which
+        the law at (lam + τ d_lam, rate + τ d_rate) changes its active set: an
+        active frictional contact's augmented multiplier reaches the edge of
+        its disk, |σ_T,j(τ)| = μ_j P_N,j(τ) (from inside: it starts to slide;
+        from outside: it may stick), or an active contact's normal impulse
+        reaches zero; each moved past its event by :data:`SLIP_MARGIN` of τ,
+        or less where the law's rows would grow there by more than
         :data:`PIVOT_FRACTION` of ``bound`` (a high μ_j, whose disk shrinks
         fast along the direction: the overshoot alone would then be a residual
         far above the one the step leaves). Along a null direction of the
-        Newton system of redundant sticking contacts (module docstring) the
-        coordinates do not move and the law is affine in τ, so each contact's
-        condition is a quadratic in τ; where a contact may not stick (a block
-        landing flat on two corners turns, so one of them slides) the iterate
-        is moved just past the point where the first one starts to slide."""
+        Newton system of redundant contacts (module docstring) the coordinates
+        do not move and the law is affine in τ, so each contact's condition is
+        a quadratic in τ, with two roots. Contacts held sticking (``stuck``)
+        have no edge to reach."""
         nc, d = self.unilateral.shape[0], self.d
         normals = jnp.asarray(self.normals)
 
@@ -347,35 +355,38 @@ class FrictionLaw(NamedTuple):
 
         a, c = sigma_and_radius(lam, rate)
         b, e = sigma_and_radius(d_lam, d_rate)
-        active = self(lam, rate).active[normals]
-        sticking = active & (c > 0) & (jnp.sum(a**2, axis=1) < c**2)
-        if self.stuck is not None:  # held sticking: no edge to reach
-            sticking = sticking & ~self.stuck
+        active = self(lam, rate).active
+        frictional = active[normals] & (self.mu > 0)
+        if self.stuck is not None:
+            frictional = frictional & ~self.stuck
         qa = jnp.sum(b**2, axis=1) - e**2
         qb = 2.0 * (jnp.sum(a * b, axis=1) - c * e)
         qc = jnp.sum(a**2, axis=1) - c**2
-        disc = jnp.maximum(qb**2 - 4.0 * qa * qc, 0.0)
-        big = -0.5 * (qb + jnp.where(qb >= 0, 1.0, -1.0) * jnp.sqrt(disc))  # roots big/qa and qc/big
+        disc = qb**2 - 4.0 * qa * qc
+        big = -0.5 * (qb + jnp.where(qb >= 0, 1.0, -1.0) * jnp.sqrt(jnp.maximum(disc, 0.0)))  # roots big/qa, qc/big
         inf = jnp.asarray(jnp.inf, a.dtype)
 
-        def positive(num, den):
-            root = num / jnp.where(den != 0, den, 1.0)
-            return jnp.where((den != 0) & (root > 0) & jnp.isfinite(root), root, inf)
+        def root(num, den):  # a root where the disk's radius is positive (not the mirrored cone's)
+            tau = num / jnp.where(den != 0, den, 1.0)
+            valid = frictional & (disc >= 0) & (den != 0) & jnp.isfinite(tau) & (tau != 0) & (c + tau * e > 0)
+            return jnp.where(valid, tau, inf)
 
-        roots = jnp.minimum(positive(big, qa), positive(qc, big))
-        first = jnp.min(jnp.where(sticking, roots, inf), initial=inf)
         # an active unilateral contact whose normal impulse falls to zero opens
         aug0 = self.k * lam[:nc] - self.p * rate[:nc]
         daug = self.k * d_lam[:nc] - self.p * d_rate[:nc]
-        opens = self(lam, rate).active & self.unilateral & (aug0 > 0)
-        first = jnp.minimum(first, jnp.min(jnp.where(opens, positive(-aug0, daug), inf), initial=inf))
-        found = jnp.isfinite(first)
-        first = jnp.where(found, first, 0.0)
-        growth = (self.rows_along(lam, rate, d_lam, d_rate, (1.0 + SLIP_MARGIN) * first)
-                  - self.rows_along(lam, rate, d_lam, d_rate, first))  # linear in the margin past the edge
-        scale = jnp.where(growth > PIVOT_FRACTION * bound, PIVOT_FRACTION * bound / jnp.where(growth > 0, growth, 1.0),
-                          1.0)
-        return jnp.where(found, (1.0 + SLIP_MARGIN * scale) * first, jnp.inf)
+        opens = active & self.unilateral & (aug0 > 0) & (daug != 0)
+        opening = jnp.where(opens, -aug0 / jnp.where(opens, daug, 1.0), inf)
+        taus = jnp.concatenate([root(big, qa), root(qc, big), opening])
+
+        def past(tau):
+            growth = (self.rows_along(lam, rate, d_lam, d_rate, (1.0 + SLIP_MARGIN) * tau)
+                      - self.rows_along(lam, rate, d_lam, d_rate, tau))  # linear in the margin past the edge
+            scale = jnp.where(growth > PIVOT_FRACTION * bound,
+                              PIVOT_FRACTION * bound / jnp.where(growth > 0, growth, 1.0), 1.0)
+            return (1.0 + SLIP_MARGIN * scale) * tau
+
+        finite = jnp.isfinite(taus)
+        return jnp.where(finite, jax.vmap(past)(jnp.where(finite, taus, 0.0)), inf)
 
 
 def restarted(law: NormalLaw | FrictionLaw, build: Callable[[FrictionLaw], Problem]) -> dict:
