@@ -61,7 +61,9 @@ def test_the_rocking_block_comes_to_rest_with_the_exact_impacts():
     measured = ts[_landings(theta)]
     n = len(resolvable)
     assert len(measured) >= n
-    np.testing.assert_allclose(measured[:5], resolvable[:5], atol=0.02)  # ... drifting by less than 2 %
+    # each landing is taken at the end of its step (first order in h): the first five drift by up to
+    # 28 ms here (15 ms at h = 1e-3 s, -20 ms at 4e-3); at their instants they are within a step (below)
+    np.testing.assert_allclose(measured[:5], resolvable[:5], atol=0.035)
 
 
 @pytest.mark.slow
@@ -125,12 +127,19 @@ def test_resting_boxes_stay_put_and_bounces_are_the_papers():
 def test_impacts_at_their_instants_with_persistent_contacts():
     """Both options: the block still comes to rest, its energy never above
     the start (after a located impact the contacts held are those closed
-    and not separating)."""
-    _, sol = _rocking(4e-3, 3.0, "smooth", impacts="instants")
+    and not separating), and it lands at the exact instants."""
+    scene, sol = _rocking(4e-3, 3.0, "smooth", impacts="instants")
     energy = np.asarray(sol.observables["energy"])
+    theta = np.asarray(sol.observables["theta"])
     assert energy.max() <= energy[0] * (1 + 1e-6)
-    assert abs(float(np.asarray(sol.observables["theta"])[-1])) < 1e-12
+    assert abs(float(theta[-1])) < 1e-12
     assert sol.stats["impacts_at_instants"] > 0
+    p = scene.parameters
+    exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
+    # a landing is seen at the record after its instant: within one step of it (measured: 4.0e-3 s at most
+    # over the 13 resolvable landings of a 60 s run)
+    measured = np.asarray(sol.ts)[_landings(theta)]
+    assert np.all(measured[:5] - exact[:5] >= -1e-9) and np.all(measured[:5] - exact[:5] <= 4e-3 + 1e-9)
 
 
 @pytest.mark.slow
@@ -159,10 +168,19 @@ def test_the_gradient_through_a_rocking_swing_is_the_finite_difference(adjoint):
     assert np.isfinite(gradient) and abs(gradient - fd) < 1e-3 * abs(fd)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "persistent_contacts does not always settle: at tilt 0.1 and h = 2e-3 s the rocking block ends in a "
-    "cycle of small swings (|theta| 1.2e-5 rad at 3 s and at 10 s; docs/friction.md, *Persistent contacts in "
-    "the smooth motion*), where the paper's step comes to rest"))
-def test_the_rocking_block_comes_to_rest_from_a_smaller_tilt():
-    _, sol = _rocking(2e-3, 3.0, "smooth", tilt=0.1)
+@pytest.mark.parametrize("h, tilt", [(2e-3, 0.1), (4e-3, 0.15), (4e-3, 0.05)])
+def test_the_rocking_block_comes_to_rest_from_other_tilts(h, tilt):
+    """Tilts where the option once never settled: at (2e-3, 0.1) a cycle of
+    swings of 1.2e-5 rad (the acceleration a kept the free fall of the
+    impact step's smooth motion: restarted from the held contacts when a
+    contact is newly held), at (4e-3, 0.15) a cycle of 1.2e-4 rad (a restart
+    that took a slip of 5e-14 m/s after the jump for sliding, and a Coulomb
+    force of μ m g sideways), at (4e-3, 0.05) a position correction that
+    cycled at its cap on a flat landing (the events along the null
+    direction of the two corners, :meth:`FrictionLaw.first_slip`). Each: no
+    failed step, flat, and the energy never above its start."""
+    _, sol = _rocking(h, 3.0, "smooth", tilt=tilt)
+    energy = np.asarray(sol.observables["energy"])
+    assert energy.max() <= energy[0] * (1 + 1e-6)
     assert abs(float(np.asarray(sol.observables["theta"])[-1])) < 1e-12
+    assert abs(float(np.asarray(sol.observables["omega"])[-1])) < 1e-12

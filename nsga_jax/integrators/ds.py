@@ -28,6 +28,7 @@ import dataclasses
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from .._custom_types import Scalar, ScalarLike, Vector
 from .._util import as_float
@@ -190,7 +191,12 @@ class DS(AbstractGenAlpha):
         kinds = self.matrix_kinds(model)
         return kinds[0].is_held, kinds[1].is_held, kinds[2].is_held
 
-    def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
+    def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector, *, h: ScalarLike = 0.0) -> StepState:
+        """The state at t0 (Algorithm 1, lines 2-3), or at a restart. ``h`` [s]:
+        with persistent contacts, the step against which a held contact's slip
+        counts as zero (:func:`~nsga_jax.integrators.persistent_contacts.held_acceleration`):
+        0 at a run's start, where v0 is exact; a restart after a jump passes
+        its step, since the jump's slips are zero only to its tolerance."""
         state = None
         if self.matrix_free(model):  # v̇̃_0 by conjugate gradients on M's element blocks
             real = jnp.result_type(q0, float)
@@ -214,7 +220,7 @@ class DS(AbstractGenAlpha):
             g0 = model.unilateral(state.q)
             held = persistent_contacts.not_separating(model, state.q, state.v, jnp.concatenate(
                 [jnp.zeros((model.n_bilateral,), bool), g0 <= open_floor(g0)]))
-            vd0 = persistent_contacts.held_acceleration(model, state.q, state.v, state.t, held)
+            vd0 = persistent_contacts.held_acceleration(model, state.q, state.v, state.t, held, self.tol_r, h)
             state = dataclasses.replace(state, vd=vd0, a=vd0, persistent=held)
         reused = self.reused(model)
         if not any(reused):
@@ -279,7 +285,7 @@ class DS(AbstractGenAlpha):
         smooth_inputs = SmoothInputs(**step.shared(), co=co, q_pred=q_pred, v_pred=v_pred,
                                      held=state.persistent if holds else None)
         if holds:
-            sol_s = persistent_contacts.smooth_solve(smooth_inputs, v_pred, self.max_iter, held[0])
+            sol_s = persistent_contacts.smooth_solve(smooth_inputs, self.max_iter, held[0])
             smooth = smooth_motion(co, h, q_pred, v_pred, sol_s.x, sol_s.aux.aug[:model.n_bilateral])
         else:
             sol_s = solve(smooth_problem, smooth_inputs, smooth_start(v_pred, model.n_bilateral), self.max_iter,
@@ -331,7 +337,11 @@ class DS(AbstractGenAlpha):
         if holds:  # a smooth motion that did not converge hands on no held contact
             rate = ops.constraints.jacobian(model, q) @ v
             persistent = persistent_contacts.held_after(model, sol_s.aux, velocity, rate, q, h)
-            new = dataclasses.replace(new, persistent=persistent & sol_s.converged)
+            persistent = persistent & sol_s.converged
+            new = dataclasses.replace(new, persistent=persistent)
+            assert state.persistent is not None
+            newly = jnp.any(persistent & ~state.persistent)  # a landing: restart from the held contacts
+            new = lax.cond(newly, lambda: persistent_contacts.restart_with_held(model, new, tol.tol_r, h), lambda: new)
         return new, out, (qt, vt)
 
 

@@ -200,15 +200,16 @@ def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: fl
     return jnp.any(inside), instant, inside & (s <= instant + together)
 
 
-def restart_after_impact(scheme: DS, model: Model, state: StepState, impact: jax.Array) -> StepState:
+def restart_after_impact(scheme: DS, model: Model, state: StepState, impact: jax.Array, h: Scalar) -> StepState:
     """After a sub-step that ends at an impact, the generalized-α variables
     restart from the post-impact state as at t0 (Algorithm 1, lines 2-3):
     v̇̃ consistent with (q⁺, v⁺) and a = v̇̃. The jump changes v, hence the
     velocity-dependent forces and the bilateral constraints' acceleration
     terms: the pre-impact a (a shifted average of past accelerations) would
     carry an O(1) error into the next steps' velocities, a first-order error
-    in the run (docs/scheme.md, *Impacts at their instants*)."""
-    fresh = scheme.init(model, state.t, state.q, state.v)
+    in the run (docs/scheme.md, *Impacts at their instants*). ``h`` [s]: the
+    run's step (:meth:`DS.init`)."""
+    fresh = scheme.init(model, state.t, state.q, state.v, h=h)
     state = eqx.tree_at(lambda s: (s.vd, s.a), state, (jnp.where(impact, fresh.vd, state.vd),
                                                        jnp.where(impact, fresh.a, state.a)))
     if state.persistent is None:
@@ -316,7 +317,7 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
             closing = jnp.concatenate([jnp.zeros((nb,), bool), located & rows])
             new, out, _ = scheme.paper_step(model, scheme.prepare(model, size, st.t), st, size, closing)
             new, out = lax.cond(located, lambda: _and_impact(scheme, model, new, out, closing), lambda: (new, out))
-            new = restart_after_impact(scheme, model, with_closed(model, new, out), located)
+            new = restart_after_impact(scheme, model, with_closed(model, new, out), located, h)
             merged = out if acc is None else _merge(acc, out)
             return new, left - size, ~located, merged, impacts + located.astype(jnp.int32)
 
