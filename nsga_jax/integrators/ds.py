@@ -141,8 +141,10 @@ class DS(AbstractGenAlpha):
             a body resting, sliding or turning about a sticking corner then
             moves at second order; the paper (``False``) leaves their forces
             to the position correction and the velocity jump, at first
-            order. Not yet robust: the rocking block's last small swings
-            never die out at some tilts and steps (docs/friction.md). Static.
+            order. With the landings at the ends of their steps, a few of
+            the rocking block's runs end in a cycle of swings a few steps
+            long that never dies out; with ``impact_instants`` too, none
+            (docs/friction.md). Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
@@ -339,9 +341,11 @@ class DS(AbstractGenAlpha):
             persistent = persistent_contacts.held_after(model, sol_s.aux, velocity, rate, q, h)
             persistent = persistent & sol_s.converged
             new = dataclasses.replace(new, persistent=persistent)
+            # a contact newly held while another was (a pivot that moves): a restarts from those held now
             assert state.persistent is not None
-            newly = jnp.any(persistent & ~state.persistent)  # a landing: restart from the held contacts
-            new = lax.cond(newly, lambda: persistent_contacts.restart_with_held(model, new, tol.tol_r, h), lambda: new)
+            moved = jnp.any(persistent & ~state.persistent) & jnp.any(state.persistent)
+            new = lax.cond(moved, lambda: persistent_contacts.restart_with_held(model, new, tol.tol_r, h),
+                           lambda: new)
         return new, out, (qt, vt)
 
 
