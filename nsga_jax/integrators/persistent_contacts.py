@@ -250,7 +250,7 @@ def held_acceleration(model: Model, q: Vector, v: Vector, t: Scalar, held: jax.A
     cone slides along that force with μ N (N from the solve with every
     contact at rest sticking). The smooth motion's start, v̇̃_0 = a_0
     (Algorithm 1, lines 2-3, with the contacts closed at t0 held), and its
-    restart where a contact is newly held (:func:`restart_with_held`): from
+    restart where the pivot moves (:func:`restart_with_held`): from
     the acceleration without them, the rocking block's first step at
     h = 4e-3 s raised its energy by 2.5e-6; from
     :func:`~nsga_jax.integrators.impact_instants.held_acceleration`, which
