@@ -156,7 +156,8 @@ def smooth_problem(inputs: SmoothInputs) -> Problem:
             G_low = G + c_q * jnp.concatenate([conv, jnp.zeros((G.shape[0] - nc, n), G.dtype)])
             return law.correction(matrix, res.r[:n], res.r[n:], G, G_low, lam, G @ vt, res.bound), floor
 
-        return Problem(residual, linearise, correct, line_search=law.damped, **restarted(law, build))
+        # damped whatever the law, as the paper's smooth motion (subproblems.smooth_problem)
+        return Problem(residual, linearise, correct, line_search=True, **restarted(law, build))
 
     return build(law)
 

@@ -107,7 +107,7 @@ def smooth_problem(inputs: SmoothInputs) -> Problem:
         dv, dlam = matrix.bordered(res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool), ks, ps)
         return (dv, dlam), floor
 
-    return Problem(residual, linearise, correct)
+    return Problem(residual, linearise, correct, line_search=True)
 
 
 def smooth_start(v_pred: Vector, nb: int):
