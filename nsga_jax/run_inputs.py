@@ -39,7 +39,7 @@ def check_scheme(scheme) -> None:
     >= 1, integer sizes >= 0 for DS's fast paths (``krylov_min_dof`` may be
     ``None``), DS's ``impact_law`` one of :data:`~nsga_jax.validation.IMPACT_LAWS`,
     its ``impact_instants`` a bool with ``max_impacts >= 1`` and
-    ``0 <= late < min_fraction < 0.5``, its ``warm_start`` a bool, and its own
+    ``0 <= late < min_fraction < 0.5`` and ``0 <= short_fraction < 1``, its ``warm_start`` a bool, and its own
     settings in their ranges (concrete values only: traced settings are
     checked where they were made)."""
     require_instance("scheme", scheme, AbstractScheme, "a scheme instance: nsga_jax.DS(), DSn(), CS() or MJ()")
@@ -57,6 +57,7 @@ def check_scheme(scheme) -> None:
         real("min_fraction", scheme.min_fraction, 0.0, 0.5, lo_open=True, hi_open=True)
         real("late", scheme.late, 0.0, scheme.min_fraction, hi_open=True,
              note="a fraction of h, below min_fraction")
+        real("short_fraction", scheme.short_fraction, 0.0, 1.0, hi_open=True, note="a fraction of h")
     for flag in ("warm_start", "persistent_contacts"):
         if hasattr(scheme, flag) and not isinstance(getattr(scheme, flag), (bool, np.bool_)):
             raise ConfigError(f"{flag} must be True or False, got {describe(getattr(scheme, flag))}")

@@ -145,6 +145,13 @@ class DS(AbstractGenAlpha):
             the rocking block's runs end in a cycle of swings a few steps
             long that never dies out; with ``impact_instants`` too, none
             (docs/friction.md). Static.
+        max_impacts, min_fraction, late, short_fraction: with
+            ``impact_instants``, the most instants resolved in a step, the
+            fraction of h within which an instant at either end of a span is
+            left to the paper's step, the fraction of h a sub-step ends past
+            its instant, and the fraction of h below which a lead-in to an
+            instant keeps the v̇̃ and a of its start
+            (:mod:`~nsga_jax.integrators.impact_instants`). Static.
     """
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
@@ -157,6 +164,7 @@ class DS(AbstractGenAlpha):
     max_impacts: int = eqx.field(static=True, default=4, kw_only=True)
     min_fraction: float = eqx.field(static=True, default=1e-6, kw_only=True)
     late: float = eqx.field(static=True, default=1e-9, kw_only=True)
+    short_fraction: float = eqx.field(static=True, default=0.1, kw_only=True)
 
     name = "ds"
     subproblems = ("smooth", "position", "velocity")

@@ -16,6 +16,9 @@ wrong (an elastic ball loses g h of speed at every bounce). With
    anyway) closes one that was open at the start, the instant is located
    in the same way on the smooth motion's own cubic (:func:`hermite_path`):
    a stiff member's discrete motion departs from any short Taylor path.
+   Where the Taylor path closes a contact but the paper's step closes none
+   that was open, nothing is located (a stiff member's smooth acceleration
+   sends the path through a stop the motion does not reach).
 2. **Split.** The step is taken as sub-steps of the paper's DS step: up to
    the instant (ended a small time ``late`` after it), where the velocity
    jump takes the closing contacts as candidates (whatever the sign of the
@@ -27,8 +30,10 @@ wrong (an elastic ball loses g h of speed at every bounce). With
    fall-back: an accumulation, as a ball coming to rest).
 3. **Across the split** each sub-step starts from the previous one's
    (q, v, v̇̃, a), with coefficients for its own size; after a sub-step that
-   ends at an impact, v̇̃ and a restart from the post-impact state as at t0
-   (:func:`restart_after_impact`).
+   ends at an impact, v̇̃ restarts from the post-impact state as at t0 and
+   a keeps its offset from it (:func:`restart_after_impact`). A lead-in to
+   an instant shorter than ``short_fraction · h`` keeps the v̇̃ and a of
+   its start (:func:`keep_accelerations_if_short`).
 
 Contacts closed at the step's start (at a round-off gap, or closed by the
 step before: active in its position correction or given an impulse, as
@@ -201,23 +206,56 @@ def first_instant(model: Model, state: StepState, span: Scalar, min_fraction: fl
 
 
 def restart_after_impact(scheme: DS, model: Model, state: StepState, impact: jax.Array, h: Scalar) -> StepState:
-    """After a sub-step that ends at an impact, the generalized-α variables
-    restart from the post-impact state as at t0 (Algorithm 1, lines 2-3):
-    v̇̃ consistent with (q⁺, v⁺) and a = v̇̃. The jump changes v, hence the
-    velocity-dependent forces and the bilateral constraints' acceleration
-    terms: the pre-impact a (a shifted average of past accelerations) would
-    carry an O(1) error into the next steps' velocities, a first-order error
-    in the run (docs/scheme.md, *Impacts at their instants*). ``h`` [s]: the
+    """After a sub-step that ends at an impact, v̇̃ restarts from the
+    post-impact state as at t0 (Algorithm 1, lines 2-3: consistent with
+    (q, v⁺), with persistent contacts those closed and not separating held,
+    :meth:`DS.init`) and a moves with it, keeping its offset from v̇̃:
+    a⁺ = v̇̃⁺ + (a⁻ - v̇̃⁻). The jump changes v, hence the velocity-dependent
+    forces, the bilateral constraints' acceleration terms and the contacts
+    held: carried across unchanged, v̇̃ and a put an O(1) error into the
+    next steps' velocities, a first-order error in the run (docs/scheme.md,
+    *Impacts at their instants*). The offset is O(h) for the resolved
+    motion; for the modes the step does not resolve it carries the scheme's
+    damping: restarted at a⁺ = v̇̃⁺, each of the flexible appendage's
+    chattering impacts reset its beam's nodal accelerations to their
+    undamped values until Newton found a spurious root
+    (docs/impact-instants.md, *A stiff beam's impacts*). ``h`` [s]: the
     run's step (:meth:`DS.init`)."""
-    fresh = scheme.init(model, state.t, state.q, state.v, h=h)
-    state = eqx.tree_at(lambda s: (s.vd, s.a), state, (jnp.where(impact, fresh.vd, state.vd),
-                                                       jnp.where(impact, fresh.a, state.a)))
+    after = scheme.init(model, state.t, state.q, state.v, h=h)
+    state = eqx.tree_at(lambda s: (s.vd, s.a), state, (jnp.where(impact, after.vd, state.vd),
+                                                       jnp.where(impact, after.vd + state.a - state.vd, state.a)))
     if state.persistent is None:
         return state
     # ... and the contacts the smooth motion holds from there: those closed and not separating
     # (DS(persistent_contacts=True), :mod:`~nsga_jax.integrators.persistent_contacts`)
-    assert fresh.persistent is not None
-    return eqx.tree_at(lambda s: s.persistent, state, jnp.where(impact, fresh.persistent, state.persistent))
+    assert after.persistent is not None
+    return eqx.tree_at(lambda s: s.persistent, state, jnp.where(impact, after.persistent, state.persistent))
+
+
+def keep_accelerations_if_short(new: StepState, start: StepState, located: jax.Array, size: Scalar, h: Scalar,
+                                short_fraction: float) -> StepState:
+    """``new`` with the v̇̃ and a of ``start`` where the sub-step from
+    ``start`` to ``new`` ends at a ``located`` instant and is shorter than
+    ``short_fraction · h`` [s]: a lead-in to an impact near the span's start
+    advances q and v only.
+
+    The generalized-α variables belong to the size of the step that made
+    them. In the limit of a mode the step does not resolve (ωh ≫ 1: the
+    rotations of a geometrically exact beam's nodes) the scheme propagates
+    (v, h a); a sub-step of size h' leaves an a of order 1/h', and the next
+    sub-step or step of size h multiplies it by h/h'. A lead-in of 7e-4 h
+    took the flexible appendage's beam's v̇̃ from 1e6 to 1.6e8 rad/s² and
+    the next sub-step's Newton to a spurious root with 2,000 times the
+    energy. Kept from the start, v̇̃ and a are O(short_fraction · h) off for
+    the resolved motion, and the restart after the impact
+    (:func:`restart_after_impact`) takes v̇̃ to the post-impact state anyway.
+    The short remainder after an impact near the span's end keeps its own:
+    kept there, the slider-crank's stiff rod gained 3 % of the energy
+    through its chattering impacts (docs/impact-instants.md, *A stiff
+    beam's impacts*)."""
+    short = located & (size < short_fraction * h)
+    return eqx.tree_at(lambda s: (s.vd, s.a), new,
+                       (jnp.where(short, start.vd, new.vd), jnp.where(short, start.a, new.a)))
 
 
 def impact_jump(scheme: DS, model: Model, state: StepState, before: StepOutput,
@@ -300,8 +338,9 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     new, taken, smooth_end = scheme.paper_step(model, ops, state, h)
     g0 = model.unilateral(state.q)  # the start's gaps, evaluated once for the three uses below
     located = first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h, hold, g0=g0)
-    closed_by_step = (taken.active_position | taken.active_velocity)[nb:] & open_contacts(g0, state.closed)
-    missed = ~located[0] & jnp.any(closed_by_step)
+    closed_by_step = jnp.any((taken.active_position | taken.active_velocity)[nb:] & open_contacts(g0, state.closed))
+    located = (located[0] & closed_by_step, *located[1:])  # the Taylor path closes what the step does not: spurious
+    missed = ~located[0] & closed_by_step
     located = lax.cond(missed, lambda: first_instant(model, state, h, scheme.min_fraction, h, scheme.late * h,
                                                      path=hermite_path(state, smooth_end, h), g0=g0),
                        lambda: located)
@@ -316,6 +355,7 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
             size = jnp.where(located, s + scheme.late * h, left)  # s < left - min_fraction h < left - late h
             closing = jnp.concatenate([jnp.zeros((nb,), bool), located & rows])
             new, out, _ = scheme.paper_step(model, scheme.prepare(model, size, st.t), st, size, closing)
+            new = keep_accelerations_if_short(new, st, located, size, h, scheme.short_fraction)
             new, out = lax.cond(located, lambda: _and_impact(scheme, model, new, out, closing), lambda: (new, out))
             new = restart_after_impact(scheme, model, with_closed(model, new, out), located, h)
             merged = out if acc is None else _merge(acc, out)
@@ -337,5 +377,6 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     return lax.cond(located[0], split, lambda _: (with_closed(model, new, taken), taken), state)
 
 
-__all__ = ["contact_rows", "first_instant", "held_acceleration", "hermite_path", "open_contacts", "open_floor",
-           "restart_after_impact", "split_step", "sticking_acceleration", "taylor_path", "with_closed"]
+__all__ = ["contact_rows", "first_instant", "held_acceleration", "hermite_path", "keep_accelerations_if_short",
+           "open_contacts", "open_floor", "restart_after_impact", "split_step", "sticking_acceleration", "taylor_path",
+           "with_closed"]
