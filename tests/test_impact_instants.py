@@ -202,6 +202,8 @@ def test_float32_elastic_ball():
     (lambda: nj.DS(impact_instants=True, max_impacts=0), r"max_impacts must be an integer >= 1, got 0"),
     (lambda: nj.DS(impact_instants=True, late=1e-3), r"late must be in \[0, 1e-06\)"),
     (lambda: nj.DS(impact_instants=True, min_fraction=0.7), r"min_fraction must be in \(0, 0.5\), got 0.7"),
+    (lambda: nj.DS(impact_instants=True, short_fraction=1.0),
+     r"short_fraction must be in \[0, 1\) \(a fraction of h\), got 1.0"),
     (lambda: nj.DS(impact_instants=1), r"impact_instants must be True or False, got int 1"),
 ])
 def test_bad_settings_are_refused_by_name(make, match):

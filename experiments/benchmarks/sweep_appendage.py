@@ -62,7 +62,8 @@ def main() -> None:
     lines = [f"flexible_appendage, t_end = {args.t_end} s, h = 5e-4 s (scene default); "
              f"{datetime.date.today()}, commit {commit}, {platform.machine()} {platform.system()}", "",
              "| e | ω0 [rad/s] | impacts | persistent contacts | failed steps (first at [s]) "
-             "| max E / E0 - 1 | impacts at instants | smooth Newton mean / max | wall [s] (with compile where a variant first runs) |",
+             "| max E / E0 - 1 | impacts at instants | smooth Newton mean / max "
+             "| wall [s] (with compile where a variant first runs) |",
              "|---|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
     for e in args.e:
