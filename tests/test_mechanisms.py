@@ -115,13 +115,17 @@ def test_ds_converges_where_cs_fails_at_a_large_step():
     the impact (t ≈ 0.042 s). At 1e-3 and 2e-3 s CS's coupled iteration
     wanders for up to 110 global iterations at the impact, and whether it
     lands within the cap of 200 depends on round-off (docs/mechanisms.md), so
-    the test takes the smallest step of the study where CS's failure does not."""
+    the test takes the smallest step of the study where CS's failure does not.
+    The smooth motion's damped updates (docs/scheme.md, step 1) take up to
+    32 Newton iterations in one step here (measured: 35 linear solves at
+    most, 8.5 a step on average; with full updates 11 and 7.0)."""
     h = 3e-3
     ds = load_scene("slider_crank", {"h": h}).run(throw=False, progress=False)
     cs = load_scene("slider_crank", {"h": h, "scheme": "cs", "max_iter": 200}).run(throw=False, progress=False)
     assert ds.stats["failed_steps"] == 0
     assert ds.stats["max_bilateral_violation_position"] <= BILATERAL_TOL
-    assert ds.stats["iterations"]["linear_solves"]["max"] <= 15
+    assert ds.stats["iterations"]["linear_solves"]["max"] <= 40
+    assert ds.stats["iterations"]["linear_solves"]["mean"] <= 10
     assert cs.stats["failed_steps"] > 0
     first = float(cs.ts[cs.failed_steps[0]])
     impact = float(ds.ts[np.argmax(np.asarray(ds.observables["force"]) > 0)])
