@@ -9,7 +9,7 @@ variable. Runs are float64 by default, which needs JAX's 64-bit mode on:
 call ``jax.config.update("jax_enable_x64", True)`` once, at the top of the
 program, before building models (or set ``JAX_ENABLE_X64=1``), or
 ``nsga_jax.configure_jax()``, which also sets the XLA CPU flag nsga_jax's
-steps run faster with (:mod:`nsga_jax.process_settings`). A float64 run
+steps run faster with (:mod:`nsga_jax._process_settings`). A float64 run
 with the mode off is refused by name (:class:`ConfigError`), never computed
 in float32; ``dtype="float32"`` runs either way. The command line
 (``nsga-jax``) calls ``configure_jax()`` for its own process.
@@ -17,51 +17,72 @@ in float32; ``dtype="float32"`` runs either way. The command line
 
 import importlib
 
-from .results import ConfigError, ConvergenceError, InvariantError  # (no JAX)
+from ._results import ConfigError, ConvergenceError, InvariantError  # (no JAX)
 
 __version__ = "0.1.0"
 
 _LAZY = {
-    "Solution": ".solution",
-    "SaveAt": ".saveat",
+    "Solution": "._solution",
+    "SaveAt": "._saveat",
     "integrate": "._integrate",
     "simulate": "._simulate",
-    "simulate_batch": ".batch",
-    "configure_jax": ".process_settings",
-    "AbstractScheme": ".integrators.base",
-    "StepOutput": ".integrators.records",
-    "Result": ".results",
-    "RESULTS": ".results",
-    "StepState": ".integrators.base",
-    "GenAlphaCoefficients": ".integrators.coefficients",
-    "CS": ".integrators.cs",
-    "DS": ".integrators.ds",
-    "DSn": ".integrators.ds",
-    "MJ": ".integrators.mj",
-    "Model": ".models",
-    "load_scene": ".scenes",
-    "Tolerances": ".monitors",
-    "check_model": ".models.check",
-    "System": ".system",
+    "simulate_batch": "._batch",
+    "configure_jax": "._process_settings",
+    "AbstractScheme": "._integrators.base",
+    "StepOutput": "._integrators.records",
+    "Result": "._results",
+    "RESULTS": "._results",
+    "StepState": "._integrators.base",
+    "GenAlphaCoefficients": "._integrators.coefficients",
+    "CS": "._integrators.cs",
+    "DS": "._integrators.ds",
+    "DSn": "._integrators.ds",
+    "MJ": "._integrators.mj",
+    "Model": "._models",
+    "load_scene": "._scenes",
+    "Tolerances": "._monitors",
+    "check_model": "._models.check",
+    "System": "._system",
     "InvariantWarning": "._simulate",
-    "RedundantConstraintsWarning": ".models.redundancy",
-    "PrecisionWarning": ".precision",
-    "bilateral_redundancy": ".models.redundancy",
-    "AbstractAdjoint": ".adjoint",
-    "DiscreteAdjoint": ".adjoint",
-    "ImpactTimeAdjoint": ".adjoint",
+    "RedundantConstraintsWarning": "._models.redundancy",
+    "PrecisionWarning": "._precision",
+    "bilateral_redundancy": "._models.redundancy",
+    "AbstractAdjoint": "._adjoint",
+    "DiscreteAdjoint": "._adjoint",
+    "ImpactTimeAdjoint": "._adjoint",
+    "sweep": "._sweep",
+    "BatchRun": "._batch",
+    "study": "._studies",
+    "run_step_sizes": "._studies",
+    "make_reference": "._studies",
+    "identify": "._identify",
+    "synthetic_data": "._identify",
+    "Data": "._data",
+    "estimate_run_bytes": "._memory",
+    "load_chunks": "._chunks",
+    "chunk_files": "._chunks",
+    "cast_floats": "._precision",
+    "use_compilation_cache": "._compilation_cache",
+    "initialize_distributed": "._distributed:initialize",
+    "write_animation": "._animate",
+    "ElementGroup": "._assembly",
+    "ElementBlocks": "._models.capabilities",
+    "EnergyMonitor": "._models.capabilities",
+    "FrictionalContacts": "._models.capabilities",
+    "member_mesh": "._batch",
 }
 _MODULES = ("scenes", "system")
 
 
 def __getattr__(name: str):
     if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+        module, _, attribute = _LAZY[name].partition(":")  # "module:attribute" where the names differ
+        value = getattr(importlib.import_module(module, __name__), attribute or name)
     elif name in _MODULES:
         value = importlib.import_module(f".{name}", __name__)
     elif name == "SCHEMES":
-        from .integrators import scheme_class
-        from .validation import SCHEME_NAMES
+        from ._integrators import scheme_class
+        from ._validation import SCHEME_NAMES
 
         value = {name: scheme_class(name) for name in SCHEME_NAMES}
     else:
@@ -107,4 +128,25 @@ __all__ = [
     "AbstractAdjoint",
     "DiscreteAdjoint",
     "ImpactTimeAdjoint",
+    "sweep",
+    "system",
+    "BatchRun",
+    "study",
+    "run_step_sizes",
+    "make_reference",
+    "identify",
+    "synthetic_data",
+    "Data",
+    "estimate_run_bytes",
+    "load_chunks",
+    "chunk_files",
+    "cast_floats",
+    "use_compilation_cache",
+    "initialize_distributed",
+    "write_animation",
+    "ElementGroup",
+    "ElementBlocks",
+    "EnergyMonitor",
+    "FrictionalContacts",
+    "member_mesh",
 ]

@@ -125,7 +125,7 @@ def bounded_lapack_batches(enabled: bool = True) -> Iterator[None]:
     batch of 64 on 2 forced CPU devices deadlocked so (both pool threads
     waiting in ``lapack_dgetrf``). A call below the splitting size runs on
     its own thread and cannot wait on the pool.
-    :class:`~nsga_jax.batch.BatchRun` traces a batch split over several CPU
+    :class:`~nsga_jax._batch.BatchRun` traces a batch split over several CPU
     devices with this on. The calls are the same LAPACK routines.
 
     The setting is read when a function is traced: a jitted function traced

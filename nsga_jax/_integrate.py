@@ -8,9 +8,9 @@ returns the same :class:`Solution` type.
 
 - Each Newton sub-problem is differentiated implicitly (implicit function
   theorem at the converged solution, active set frozen), never by unrolling
-  its iterations: a custom JVP of :func:`nsga_jax.integrators.newton.solve`
+  its iterations: a custom JVP of :func:`nsga_jax._integrators.newton.solve`
   that a run nobody differentiates never evaluates. ``adjoint=`` chooses
-  which derivative each step carries (:mod:`nsga_jax.adjoint`).
+  which derivative each step carries (:mod:`nsga_jax._adjoint`).
 - The step loop is a ``lax.scan`` over chunks of steps with ``jax.checkpoint``
   on each chunk: reverse mode stores one state per chunk and recomputes a
   chunk during the backward pass, keeping that chunk's per-step residuals,
@@ -36,19 +36,19 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ._adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
+from ._first_step import LIMIT_SECONDS, check_first_step
+from ._integrators.base import AbstractScheme
+from ._integrators.records import StepOutput, output_template
+from ._memory import check_fits
+from ._models.base import Model
+from ._precision import precision_notes, refuse_mixed_precision, require_x64_for_inputs
+from ._results import RESULTS, ConfigError, from_code
 from ._run_core import advance, constraints_at, prepare_and_init
-from .adjoint import ADJOINT_KINDS, AbstractAdjoint, DiscreteAdjoint, refuse_without_implicit_adjoint
-from .first_step import LIMIT_SECONDS, check_first_step
-from .integrators.base import AbstractScheme
-from .integrators.records import StepOutput, output_template
-from .memory import check_fits
-from .models.base import Model
-from .precision import precision_notes, refuse_mixed_precision, require_x64_for_inputs
-from .results import RESULTS, ConfigError, from_code
-from .run_inputs import check_scheme, check_scheme_for_model
-from .saveat import HOST_ONLY, SaveAt, refuse
-from .solution import Solution, first_failed_code, traced_stats
-from .validation import check_model_fields, describe, integer, require_instance, time_grid
+from ._run_inputs import check_scheme, check_scheme_for_model
+from ._saveat import HOST_ONLY, SaveAt, refuse
+from ._solution import Solution, first_failed_code, traced_stats
+from ._validation import check_model_fields, describe, integer, require_instance, time_grid
 
 MAX_SCAN_STEPS = 2**31 - 1
 """The most steps of one pure run (its scan counts steps in int32; every
@@ -66,7 +66,7 @@ def _is_traced(x: Any) -> bool:
 
 def _step_count(t0, t1, h, n_steps: int | None) -> int:
     """``n_steps`` checked, or N = floor((t1 - t0)/h) from concrete times
-    (:func:`~nsga_jax.validation.time_grid`); traced times need ``n_steps``."""
+    (:func:`~nsga_jax._validation.time_grid`); traced times need ``n_steps``."""
     traced = [name for name, x in (("t0", t0), ("t1", t1), ("h", h)) if _is_traced(x)]
     if n_steps is None:
         if traced:
@@ -118,17 +118,17 @@ def integrate(
             recompilation when they change), then ``n_steps`` is needed.
         q0, v0: initial coordinates and velocities (n,).
         n_steps: number of steps N (static); default floor((t1 - t0)/h) from
-            concrete times (:func:`~nsga_jax.validation.step_count`). Step k
+            concrete times (:func:`~nsga_jax._validation.step_count`). Step k
             starts at t0 + k h (never accumulated).
         saveat: what to keep (:class:`~nsga_jax.SaveAt`): every k-th row, or
             a function of each row's state and record. ``SaveAt.chunks``
             needs the host driver and is refused here.
-        adjoint: which derivative the steps carry (:mod:`nsga_jax.adjoint`):
+        adjoint: which derivative the steps carry (:mod:`nsga_jax._adjoint`):
             :class:`~nsga_jax.DiscreteAdjoint` (default), the exact derivative
             of the time-stepping map (impacts held at their steps), or
             :class:`~nsga_jax.ImpactTimeAdjoint`, at each step where a contact
             closes the derivative of a continuous-time rebuild of the step,
-            which sees the impact instant move (:mod:`nsga_jax.impact_time`).
+            which sees the impact instant move (:mod:`nsga_jax._impact_time`).
             Values are the same with both.
         throw: raise at run time (``eqx.error_if``) if any step fails; with
             ``False`` failures are in ``result``, ``stats["failed_steps"]``
@@ -139,7 +139,7 @@ def integrate(
             256 MiB).
         first_step_limit: refuse, before tracing the steps, a run on the
             dense path whose first step is estimated above this many seconds
-            (60 by default; :func:`~nsga_jax.first_step.check_first_step`; one
+            (60 by default; :func:`~nsga_jax._first_step.check_first_step`; one
             run: a ``vmap``'s members are not seen); ``None`` runs anyway.
 
     Returns:
@@ -147,7 +147,7 @@ def integrate(
         ``v`` (rows, n), ``records`` (the stacked records of the kept rows, the
         initial row first, or what ``saveat.fn`` returned for them),
         ``result`` (the first failure's code), ``stats`` (over every step:
-        :func:`~nsga_jax.solution.traced_stats`), ``h``.
+        :func:`~nsga_jax._solution.traced_stats`), ``h``.
     """
     check_scheme(scheme)
     refuse(saveat, HOST_ONLY, "integrate (pure)", "nsga_jax.simulate, the host driver")

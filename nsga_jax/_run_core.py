@@ -12,7 +12,7 @@ loop:
   drivers) run it in :func:`run_chunk`: up to ``length`` steps in one
   ``while_loop`` whose trip count is traced (one compilation for every chunk
   and every h), writing each step's record into packed buffers that the host
-  unpacks (:func:`~nsga_jax.integrators.records.unpack_outputs`). A batch
+  unpacks (:func:`~nsga_jax._integrators.records.unpack_outputs`). A batch
   is the same loop with the step ``vmap``-ed over a leading member axis.
 
 :func:`prepare_and_init` is the one preparation: the scheme's constant
@@ -29,11 +29,11 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .integrators.base import AbstractScheme, StepState
-from .integrators.operators import Operators
-from .integrators.records import StepOutput, output_template, pack_output, packed_sizes
-from .models.base import Model
-from .results import Result
+from ._integrators.base import AbstractScheme, StepState
+from ._integrators.operators import Operators
+from ._integrators.records import StepOutput, output_template, pack_output, packed_sizes
+from ._models.base import Model
+from ._results import Result
 
 
 def prepare_and_init(model: Model, scheme: AbstractScheme, t0, q0, v0, h) -> tuple[Operators, StepState]:
@@ -55,7 +55,7 @@ def advance(model: Model, scheme: AbstractScheme, ops: Operators, state: StepSta
     """The one step body: a step of ``scheme`` of size h [s] from ``state`` at
     time t [s] (set on the state: times are ``t0 + k h``, never summed).
 
-    ``adjoint`` (an :class:`~nsga_jax.adjoint.AbstractAdjoint`) chooses the
+    ``adjoint`` (an :class:`~nsga_jax._adjoint.AbstractAdjoint`) chooses the
     derivative the step carries, with its ``extra`` from step to step; the
     host drivers carry none (``None``: the scheme's step as it is, CS
     included). Returns the new state, the step's record and the new ``extra``.
@@ -70,7 +70,7 @@ def advance(model: Model, scheme: AbstractScheme, ops: Operators, state: StepSta
 def run_chunk(model: Model, scheme: AbstractScheme, ops: Operators, state: StepState, h, t_start, steps,
               stop_on_failure, length: int, members: bool = False):
     """Up to ``length`` steps in one ``while_loop``, each step's record packed
-    (:func:`~nsga_jax.integrators.records.pack_output`) into float and integer
+    (:func:`~nsga_jax._integrators.records.pack_output`) into float and integer
     buffers of ``length`` rows.
 
     Step i of the chunk starts at ``t_start + i h``. The loop takes ``steps``

@@ -6,7 +6,7 @@ loops over chunks of steps (one compilation, reused for every chunk); no Python
 runs inside a chunk. After each chunk the host adds the chunk to the run's
 statistics, keeps its records (every ``SaveAt.every``-th step of them), reports
 progress, gathers the kept records into few files in ``SaveAt.chunks``
-(:class:`~nsga_jax.chunks.RecordFiles`, written at the latest every few
+(:class:`~nsga_jax._chunks.RecordFiles`, written at the latest every few
 seconds and when the run stops or is interrupted), hands the full chunk to an
 optional callback, and stops early on a failure when ``throw=True``. With
 ``SaveAt(every=k > 1)`` the memory a run holds is one chunk plus the kept
@@ -30,23 +30,30 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._chunks import RecordFiles, chunk_length, chunk_plan
+from ._compilation_cache import cache_events, compile_source
+from ._diagnosis import FLOAT32_HINT, nonfinite_origin
+from ._first_step import LIMIT_SECONDS, NOTE_SECONDS, check_first_step
+from ._integrators.base import AbstractScheme
+from ._integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
+from ._memory import check_fits
+from ._models.base import Model
+from ._monitors import (
+    ENERGY_WARNING,
+    RunTotals,
+    Tolerances,
+    coarse_step_warning,
+    default_tolerances,
+    invariant_warnings,
+)
+from ._precision import cast_floats
+from ._progress import Progress
+from ._results import ConvergenceError, InvariantError, Result
 from ._run_core import constraints_at, prepare_and_init, run_chunk
-from .chunks import RecordFiles, chunk_length, chunk_plan
-from .compilation_cache import cache_events, compile_source
-from .diagnosis import FLOAT32_HINT, nonfinite_origin
-from .first_step import LIMIT_SECONDS, NOTE_SECONDS, check_first_step
-from .integrators.base import AbstractScheme
-from .integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
-from .memory import check_fits
-from .models.base import Model
-from .monitors import ENERGY_WARNING, RunTotals, Tolerances, coarse_step_warning, default_tolerances, invariant_warnings
-from .precision import cast_floats
-from .progress import Progress
-from .results import ConvergenceError, InvariantError, Result
-from .run_inputs import check_run_inputs
-from .saveat import DEVICE_ONLY, SaveAt, refuse
-from .solution import Observables, Solution, host_solution, with_observables
-from .validation import integer, require_instance
+from ._run_inputs import check_run_inputs
+from ._saveat import DEVICE_ONLY, SaveAt, refuse
+from ._solution import Observables, Solution, host_solution, with_observables
+from ._validation import integer, require_instance
 
 # filter_jit's wrappers have ``lower`` (compiled ahead of the run); their declared types are the bare functions'
 _run_chunk_jit = cast(Any, eqx.filter_jit(run_chunk))
@@ -92,7 +99,7 @@ def simulate(
             while ``stats``, ``failed_steps`` and ``on_chunk`` still see every
             step (memory stays flat for long runs); ``chunks=folder`` writes
             the kept records to that folder as the run goes (few files,
-            :class:`~nsga_jax.chunks.RecordFiles`; written at once on an
+            :class:`~nsga_jax._chunks.RecordFiles`; written at once on an
             interruption). ``SaveAt.fn`` is for :func:`~nsga_jax.integrate` and is
             refused here.
         throw: stop at the first step that fails (Newton cap or NaN/inf) and
@@ -117,14 +124,14 @@ def simulate(
         strict: raise :class:`InvariantError` when the energy rises at an
             impact step past ``tolerances.impact_energy`` (by default a
             warning in ``Solution.warnings``).
-        tolerances: the monitors' bounds (:class:`~nsga_jax.monitors.Tolerances`).
+        tolerances: the monitors' bounds (:class:`~nsga_jax._monitors.Tolerances`).
         check_memory: refuse, before compiling, a run whose dense iteration
             matrices and kept records would not fit in the available memory
-            (:func:`~nsga_jax.memory.check_fits`); ``False`` (or the
+            (:func:`~nsga_jax._memory.check_fits`); ``False`` (or the
             environment variable ``NSGA_JAX_SKIP_MEMORY_CHECK=1``) skips it.
         first_step_limit: refuse, before compiling, a run on the dense path
             whose first step is estimated above this many seconds (60 by
-            default; :func:`~nsga_jax.first_step.check_first_step`); ``None``
+            default; :func:`~nsga_jax._first_step.check_first_step`); ``None``
             runs anyway. An estimate above 5 s is shown with the compiling
             line, and the first chunk is then one step.
 
@@ -146,7 +153,7 @@ def simulate(
     if on_chunk is not None and not callable(on_chunk):
         raise TypeError(f"on_chunk must be a function or None, got {type(on_chunk).__name__}")
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
-    require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.monitors.Tolerances")
+    require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.Tolerances")
     template = output_template(model, np.dtype(dtype), scheme.subproblems)
     check_fits(model, scheme, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
                record_numbers=sum(packed_sizes(template)), enabled=check_memory)
@@ -195,12 +202,12 @@ def _host_loop(model, scheme, t0, n_steps, h, q0, v0, *, throw, chunk_size, prog
                dtype, files=None, estimate=None) -> tuple[dict[str, Any], RunTotals, ConvergenceError | None]:
     """The time loop of :func:`simulate` on validated arguments, in ``dtype``
     (that of the model, scheme, q0 and v0 it is given); returns the solution's pieces (the arguments of
-    :func:`~nsga_jax.solution.host_solution`), the running totals and, when
+    :func:`~nsga_jax._solution.host_solution`), the running totals and, when
     ``throw`` and a step failed, the error to raise. ``files``: the
-    :class:`~nsga_jax.chunks.RecordFiles` the kept records go to, flushed
+    :class:`~nsga_jax._chunks.RecordFiles` the kept records go to, flushed
     however the loop ends. ``estimate``: the first
     step's, shown while compiling, where it is long (the first chunk is then one step; later
-    chunks hold the steps of about :data:`~nsga_jax.progress.EVERY_SECONDS`)."""
+    chunks hold the steps of about :data:`~nsga_jax._progress.EVERY_SECONDS`)."""
     length = chunk_size or chunk_length(model)
     real = np.dtype(dtype).type
 

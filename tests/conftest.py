@@ -4,8 +4,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.compilation_cache import ENV
-from nsga_jax.process_settings import configure_jax
+from nsga_jax._compilation_cache import ENV
+from nsga_jax._process_settings import configure_jax
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them (importing nsga_jax sets neither)
 
@@ -56,8 +56,8 @@ def _compilation_cache(tmp_path_factory):
 def scene_registry():
     """The scenes a test registers (system files, scene files) stay out of the
     other tests' registry: it is restored after the test."""
+    from nsga_jax._scenes.files import _SCENE_FILES
     from nsga_jax.scenes import REGISTRY
-    from nsga_jax.scenes.files import _SCENE_FILES
 
     before, files = dict(REGISTRY), dict(_SCENE_FILES)
     yield REGISTRY

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 from reference_models import ElasticBar
 
-from nsga_jax.models import Model
+from nsga_jax._models import Model
 
 
 class Oscillator(Model):

@@ -11,8 +11,8 @@ from jax.extend import core as jcore
 from reference_models import BouncingBall
 
 import nsga_jax as nj
-from nsga_jax.integrators.linalg import Factorisation
-from nsga_jax.integrators.newton import Problem, Residual, newton, solve
+from nsga_jax._integrators.linalg import Factorisation
+from nsga_jax._integrators.newton import Problem, Residual, newton, solve
 
 N = 5
 A, RHS = spd_system(N, seed=7)

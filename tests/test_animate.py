@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.animate.command import write_animation
-from nsga_jax.animate.frames import Animation, animation_of, frame_rows
-from nsga_jax.animate.html import CONTROLS_HEIGHT, page, read_data
-from nsga_jax.animate.outlines import convex_hull, hex_outer_faces, inertia_box, planar_outline
-from nsga_jax.animate.run_folder import RecordedRun, load_run
-from nsga_jax.animate.screen import STYLES, View, fit, frame_shapes, project
-from nsga_jax.cli import main
+from nsga_jax._animate.command import write_animation
+from nsga_jax._animate.frames import Animation, animation_of, frame_rows
+from nsga_jax._animate.html import CONTROLS_HEIGHT, page, read_data
+from nsga_jax._animate.outlines import convex_hull, hex_outer_faces, inertia_box, planar_outline
+from nsga_jax._animate.run_folder import RecordedRun, load_run
+from nsga_jax._animate.screen import STYLES, View, fit, frame_shapes, project
+from nsga_jax._cli import main
 from nsga_jax.scenes import REGISTRY, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -178,14 +178,14 @@ def test_planar_outlines_follow_the_anchors_and_the_inertia():
 
 
 def _features(anchors, radius=0.0):
-    from nsga_jax.animate.outlines import Features
+    from nsga_jax._animate.outlines import Features
 
     return Features([np.asarray(a, float) for a in anchors], radius)
 
 
 def test_a_3d_body_is_the_box_of_its_inertia_and_a_mesh_its_outer_faces():
-    from nsga_jax.elements.hex8 import structured_hex_mesh
-    from nsga_jax.elements.rigid_body import box_inertia
+    from nsga_jax._elements.hex8 import structured_hex_mesh
+    from nsga_jax._elements.rigid_body import box_inertia
 
     vertices = inertia_box(2.0, np.asarray(box_inertia(2.0, np.array([0.1, 0.2, 0.3]))))
     assert sorted(np.ptp(vertices, axis=0)) == pytest.approx([0.1, 0.2, 0.3])

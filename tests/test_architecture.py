@@ -15,23 +15,25 @@ PACKAGE = Path(__file__).resolve().parents[1] / "nsga_jax"
 
 LAYERS: list[tuple[str, set[str]]] = [
     # (layer, top-level modules or subpackages of nsga_jax), from the bottom up
-    ("foundation", {"_compat", "_custom_types", "_util", "results", "validation", "precision", "compilation_cache",
-                    "packaged", "process_settings"}),
-    ("physics", {"elements", "assembly", "blocks", "models", "system", "exact", "exact_pendulums"}),
-    ("numerics", {"integrators", "adjoint", "impact_time", "impact_time_friction"}),
-    ("runs", {"saveat", "_integrate", "_simulate", "_run_core", "solution", "monitors", "diagnosis", "batch",
-              "distributed", "run_inputs", "chunks", "memory", "progress", "first_step"}),
-    ("application", {"scenes", "cli", "cli_options", "cli_config", "bench", "sweep", "sweep_batches", "sweep_build",
-                     "sweep_checks", "grid", "identify", "fit_steps", "data", "studies", "output", "plotting",
-                     "sweep_plot", "folders", "tables", "metrics", "animate"}),
-    ("package", {"__init__", "examples"}),  # examples/: a user's scene file, on the public API
+    ("foundation", {"_compat", "_custom_types", "_util", "_results", "_validation", "_precision",
+                    "_compilation_cache", "_packaged", "_process_settings"}),
+    ("physics", {"_elements", "_assembly", "_blocks", "_models", "_system", "_exact", "_exact_pendulums"}),
+    ("numerics", {"_integrators", "_adjoint", "_impact_time", "_impact_time_friction"}),
+    ("runs", {"_saveat", "_integrate", "_simulate", "_run_core", "_solution", "_monitors", "_diagnosis", "_batch",
+              "_distributed", "_run_inputs", "_chunks", "_memory", "_progress", "_first_step"}),
+    ("application", {"_scenes", "_cli", "_cli_options", "_cli_config", "_bench", "_sweep", "_sweep_batches",
+                     "_sweep_build", "_sweep_checks", "_grid", "_identify", "_fit_steps", "_data", "_studies",
+                     "_output", "_plotting", "_sweep_plot", "_folders", "_tables", "_metrics", "_animate"}),
+    # the public API: the package's names, its two public namespaces, and examples/ (a user's scene file)
+    ("package", {"__init__", "system", "scenes", "examples"}),
 ]
+PUBLIC = {"__init__", "system", "scenes", "examples"}
 LEVEL = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}
 NAME = {i: name for i, (name, _) in enumerate(LAYERS)}
 
 
 def unit_of(module: str) -> str:
-    """``nsga_jax.integrators.ds`` -> ``integrators``; ``nsga_jax`` -> ``__init__``."""
+    """``nsga_jax._integrators.ds`` -> ``integrators``; ``nsga_jax`` -> ``__init__``."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 
@@ -95,12 +97,12 @@ def test_no_module_imports_a_layer_above_its_own(path):
 def test_the_checker_sees_upward_imports():
     """The checker itself: a lazy import of the command line from inside a
     function of the numerics is found, and one under TYPE_CHECKING is not."""
-    source = ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from ..solution import Solution\n"
-              "def f():\n    from ..cli import main\n    return main\n")
-    found = imports_of(source, "nsga_jax.integrators.probe")
-    assert found == [(5, "nsga_jax.cli")]
-    assert LEVEL[unit_of("nsga_jax.cli")] > LEVEL[unit_of("nsga_jax.integrators.probe")]
-    assert imports_of("from . import results\n", "nsga_jax", is_package=True) == [(1, "nsga_jax.results")]
+    source = ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .._solution import Solution\n"
+              "def f():\n    from .._cli import main\n    return main\n")
+    found = imports_of(source, "nsga_jax._integrators.probe")
+    assert found == [(5, "nsga_jax._cli")]
+    assert LEVEL[unit_of("nsga_jax._cli")] > LEVEL[unit_of("nsga_jax._integrators.probe")]
+    assert imports_of("from . import _results\n", "nsga_jax", is_package=True) == [(1, "nsga_jax._results")]
 
 
 def private_names_imported(source: str, module: str, is_package: bool = False) -> list[str]:
@@ -131,9 +133,9 @@ def test_no_module_imports_another_modules_private_names(path):
 
 
 def test_the_private_name_checker_sees_them():
-    assert private_names_imported("from ..precision import _hidden, precision\n", "nsga_jax.integrators.ds") == [
-        "nsga_jax.precision._hidden"]
-    assert private_names_imported("from . import _custom_types\n", "nsga_jax.solution") == []
+    assert private_names_imported("from .._precision import _hidden, precision\n", "nsga_jax._integrators.ds") == [
+        "nsga_jax._precision._hidden"]
+    assert private_names_imported("from . import _custom_types\n", "nsga_jax._solution") == []
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -201,4 +203,39 @@ def test_the_cycle_checker_sees_cycles():
     assert cycles(graph) == [["a", "b", "c"], ["e", "f"]]
     assert cycles({"a": {"b"}, "b": set()}) == []
     graph = import_graph()
-    assert "nsga_jax.scenes.spec" in graph["nsga_jax.scenes.system_file"]  # `from .spec import ...` is seen
+    assert "nsga_jax._scenes.spec" in graph["nsga_jax._scenes.system_file"]  # `from .spec import ...` is seen
+
+
+def test_every_module_outside_the_public_api_is_private():
+    """Like diffrax and equinox: the implementation lives in private modules
+    (``_name.py``, ``_package/``); what a user imports is the package's flat
+    API and its two public namespaces, ``nsga_jax.system`` (parts) and
+    ``nsga_jax.scenes`` (scenes)."""
+    public = sorted({unit_of(module_name(p)) for p in SOURCES} - PUBLIC)
+    assert [unit for unit in public if not unit.startswith("_")] == []
+
+
+def test_the_public_namespaces_only_re_export():
+    """``system`` and ``scenes`` hold no code of their own: each name they
+    export is defined in a private module, and internal modules never import
+    them (the layer test above: they sit in the top layer)."""
+    import nsga_jax.scenes
+    import nsga_jax.system
+
+    for namespace in (nsga_jax.system, nsga_jax.scenes):
+        for name in namespace.__all__:
+            value = getattr(namespace, name)
+            home = getattr(value, "__module__", None) or namespace.__name__
+            assert home.startswith("nsga_jax._") or not callable(value), (namespace.__name__, name, home)
+
+
+def test_the_flat_api_is_documented():
+    """Every name the package exports is spelled in docs/python-api.md."""
+    import nsga_jax
+
+    page = (PACKAGE.parent / "docs" / "python-api.md").read_text()
+    missing = [name for name in nsga_jax.__all__ if f"`{name}" not in page and f"nj.{name}" not in page
+               and f"nsga_jax.{name}" not in page]
+    assert missing == []
+    for name in nsga_jax.__all__:
+        assert getattr(nsga_jax, name) is not None

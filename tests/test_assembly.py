@@ -8,7 +8,7 @@ from helpers import GenericBar
 from reference_models import ElasticBar
 
 import nsga_jax as nj
-from nsga_jax.elements import bar_internal_force
+from nsga_jax._elements import bar_internal_force
 
 BAR = dict(E=900.0, rho=1.0, area=1.0, length=10.0, gap0=5.005, e=0.0, n_elements=20)
 
@@ -62,7 +62,7 @@ def _scene_groups():
 
 
 def test_chains_are_recognised_from_their_dof_maps():
-    from nsga_jax.assembly import StaticIndex, chain_layout
+    from nsga_jax._assembly import StaticIndex, chain_layout
 
     groups = _scene_groups()
     assert chain_layout(groups["impacting_bar"].dofs) == (0, 1)
@@ -75,7 +75,7 @@ def test_chains_are_recognised_from_their_dof_maps():
 @pytest.mark.parametrize("offset, s, n_el, tail", [(0, 1, 7, 0), (0, 3, 4, 0), (2, 2, 3, 3), (0, 2, 1, 0)])
 def test_chain_matrix_assembly_equals_the_scatter_add(offset, s, n_el, tail):
     """A chain's block-tridiagonal layout gives exactly the scatter-add's matrix."""
-    from nsga_jax.assembly import StaticIndex, chain_layout, scatter_matrix
+    from nsga_jax._assembly import StaticIndex, chain_layout, scatter_matrix
 
     dofs = offset + s * np.arange(n_el)[:, None] + np.arange(2 * s)[None, :]
     n = int(dofs.max()) + 1 + tail
@@ -93,7 +93,7 @@ def test_quadratic_form_equals_that_of_the_assembled_matrix(offset, s, n_el, tai
     """Σ_e x_eᵀ A_e x_e, read by slices for a chain (``offset``) and by a
     gather otherwise (``None``: elements in a scattered order), is xᵀ A x of
     the assembled A, also under vmap."""
-    from nsga_jax.assembly import ElementGroup, StaticIndex, chain_layout, scatter_matrix
+    from nsga_jax._assembly import ElementGroup, StaticIndex, chain_layout, scatter_matrix
 
     rng = np.random.default_rng(s + n_el)
     if offset is None:

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from nsga_jax.exact import bouncing_ball, bouncing_ball_impacts
-from nsga_jax.metrics import observed_order, relative_l1_error
+from nsga_jax._exact import bouncing_ball, bouncing_ball_impacts
+from nsga_jax._metrics import observed_order, relative_l1_error
 from nsga_jax.scenes import load_scene
 
 H0, G = 1.0, 9.81

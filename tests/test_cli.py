@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.chunks import load_chunks
-from nsga_jax.cli import main
+from nsga_jax._chunks import load_chunks
+from nsga_jax._cli import main
 from nsga_jax.scenes import REGISTRY, load_scene
 
 CONFIGS = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs"
@@ -49,7 +49,7 @@ def test_run_names_the_setting_of_its_scheme(tmp_path, capsys):
 
 def _cli(args: list[str], cache) -> dict:
     env = {**os.environ, "NSGA_JAX_CACHE": str(cache)}
-    proc = subprocess.run([sys.executable, "-m", "nsga_jax.cli", *args, "--quiet"], env=env, capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "nsga_jax._cli", *args, "--quiet"], env=env, capture_output=True,
                           text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = Path(args[args.index("--out") + 1])
@@ -79,7 +79,7 @@ def test_later_runs_load_compiled_programs_from_the_cache(tmp_path):
 
 
 def test_chunks_are_written_as_they_finish(tmp_path):
-    from nsga_jax.output import chunk_writer
+    from nsga_jax._output import chunk_writer
 
     out = tmp_path / "partial_run"
     scene = load_scene("bouncing_ball", {"t_end": 1.0, "h": 1e-2})

@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from nsga_jax.cli import EXIT_INPUT, command_parser, main
+from nsga_jax._cli import EXIT_INPUT, command_parser, main
 
 MALFORMED = ("abc", "-1", "nan", "1e999", "")
 """Values tried on every option that takes one (those an option legitimately

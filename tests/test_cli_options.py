@@ -11,11 +11,11 @@ import json
 import numpy as np
 import pytest
 
-from nsga_jax import bench as bench_module
-from nsga_jax import progress
-from nsga_jax.chunks import load_chunks
-from nsga_jax.cli import EXIT_INPUT, EXIT_INTERRUPTED, main
-from nsga_jax.cli_options import BENCH_SCENES, command_parser
+from nsga_jax import _bench as bench_module
+from nsga_jax import _progress as progress
+from nsga_jax._chunks import load_chunks
+from nsga_jax._cli import EXIT_INPUT, EXIT_INTERRUPTED, main
+from nsga_jax._cli_options import BENCH_SCENES, command_parser
 
 
 def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.exact import bouncing_ball, rigid_pendulum
+from nsga_jax._exact import bouncing_ball, rigid_pendulum
 from nsga_jax.scenes import parametrize
 
 pytestmark = pytest.mark.slow

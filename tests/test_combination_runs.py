@@ -26,14 +26,14 @@ from test_integrate import assert_same_run
 from test_rigid_box import euler_reference
 
 import nsga_jax as nj
-from nsga_jax import memory
-from nsga_jax.batch import stack_models
-from nsga_jax.cli import main
-from nsga_jax.exact_pendulums import double_pendulum
-from nsga_jax.identify import Data, identify, synthetic_data
-from nsga_jax.metrics import observed_order, relative_l1_error
+from nsga_jax import _memory as memory
+from nsga_jax._batch import stack_models
+from nsga_jax._cli import main
+from nsga_jax._exact_pendulums import double_pendulum
+from nsga_jax._identify import Data, identify, synthetic_data
+from nsga_jax._metrics import observed_order, relative_l1_error
+from nsga_jax._sweep import sweep
 from nsga_jax.scenes import load_scene, parametrize
-from nsga_jax.sweep import sweep
 
 SYSTEMS = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "systems"
 BALL_FILE = str(SYSTEMS / "ball_between_walls.toml")

@@ -1,4 +1,4 @@
-"""The frictionless contact law as an object (nsga_jax/integrators/contact_law.py):
+"""The frictionless contact law as an object (nsga_jax/_integrators/contact_law.py):
 its active set is the residual's, its correction is the bordered Newton
 correction of that active set, and it solves the linear projection it
 describes."""
@@ -9,9 +9,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from nsga_jax.integrators.contact_law import NormalLaw, linearised_active
-from nsga_jax.integrators.friction import contact_law
-from nsga_jax.integrators.linalg import Factorisation, solve_bordered
+from nsga_jax._integrators.contact_law import NormalLaw, linearised_active
+from nsga_jax._integrators.friction import contact_law
+from nsga_jax._integrators.linalg import Factorisation, solve_bordered
 
 RNG = np.random.default_rng(3)
 N, NC = 5, 4

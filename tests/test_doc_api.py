@@ -1,6 +1,6 @@
 """Every Python block of README.md and docs/*.md, run or not, speaks the
-real API: each ``nj.X`` / ``nsga_jax.X`` name (and each name imported from
-nsga_jax) exists, each keyword argument of a call to one of them is a
+real, public API: each ``nj.X`` / ``nsga_jax.X`` name (and each name imported from
+nsga_jax) exists and is not private, each keyword argument of a call to one of them is a
 parameter of its signature, and no adjoint is given as a string."""
 
 from __future__ import annotations
@@ -42,6 +42,12 @@ def problems(code: str) -> list[str]:
     names: dict[str, object] = {"nj": nsga_jax, "nsga_jax": nsga_jax}
     found = []
     for node in ast.walk(tree):
+        private = [m for m in ([node.module or ""] if isinstance(node, ast.ImportFrom) else
+                               [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+                   if m.startswith("nsga_jax._")]
+        private += [f"nsga_jax.{node.attr}" for node in [node] if isinstance(node, ast.Attribute)
+                    and node.attr.startswith("_") and ast.unparse(node.value) in ("nj", "nsga_jax")]
+        found += [f"line {node.lineno}: {m} is private (use the package's public names)" for m in private]
         if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("nsga_jax"):
             module = importlib.import_module(node.module or "")
             for alias in node.names:
@@ -92,5 +98,7 @@ def test_the_checker_sees_a_stale_call():
     assert problems("import nsga_jax as nj\nnj.integrate(m, s, 0, 1, 1e-3, q, v, adjoint='discrete')\n") == [
         "line 2: adjoint='discrete' (an adjoint instance is expected)"]
     assert problems("import nsga_jax as nj\nnj.trajectory(m)\n") == ["line 2: nsga_jax has no trajectory"]
+    assert problems("from nsga_jax._batch import simulate_batch\n") == [
+        "line 1: nsga_jax._batch is private (use the package's public names)"]
     assert problems("import nsga_jax as nj\nnj.simulate(m, s, 0, 1, 1e-3, q, v, every=2)\n") == [
         "line 2: nj.simulate() has no parameter 'every'"]

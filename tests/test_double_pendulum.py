@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax.exact_pendulums import _mass, _rhs, double_pendulum, double_pendulum_energy
+from nsga_jax._exact_pendulums import _mass, _rhs, double_pendulum, double_pendulum_energy
 from nsga_jax.scenes import configure, load_scene
 
 KEYS = ("m1", "m2", "l1", "l2", "gravity", "theta1", "theta2", "omega1", "omega2", "wall_x", "e")

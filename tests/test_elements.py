@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from reference_models import PlanarBeam
 
-from nsga_jax.elements.beam2d import beam_internal_force
-from nsga_jax.elements.hex8 import hex8_geometry, hex8_internal_force, lame, structured_hex_mesh
-from nsga_jax.elements.rigid_body import (
+from nsga_jax._elements.beam2d import beam_internal_force
+from nsga_jax._elements.hex8 import hex8_geometry, hex8_internal_force, lame, structured_hex_mesh
+from nsga_jax._elements.rigid_body import (
     angular_velocity,
     box_inertia,
     box_vertices,

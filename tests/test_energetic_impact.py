@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax.cli import main
-from nsga_jax.monitors import ENERGETIC_HINT, ENERGY_WARNING, RunTotals, default_tolerances, invariant_warnings
+from nsga_jax._cli import main
+from nsga_jax._monitors import ENERGETIC_HINT, ENERGY_WARNING, RunTotals, default_tolerances, invariant_warnings
 from nsga_jax.scenes import load_scene, make_scheme
 from nsga_jax.system import Gravity, PlaneContact, RigidBody2D, System
 

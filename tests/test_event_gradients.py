@@ -9,8 +9,8 @@ import pytest
 from reference_models import BouncingBall
 
 import nsga_jax as nj
-from nsga_jax.adjoint import adjoint_named
-from nsga_jax.exact import bouncing_ball, rigid_pendulum
+from nsga_jax._adjoint import adjoint_named
+from nsga_jax._exact import bouncing_ball, rigid_pendulum
 from nsga_jax.scenes import parametrize
 
 G = 9.81

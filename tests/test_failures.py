@@ -91,11 +91,11 @@ def test_a_failure_after_a_finite_start_gets_no_singular_matrix_hint():
 def test_a_singular_block_of_the_tridiagonal_elimination_is_named():
     import dataclasses
 
+    from nsga_jax._integrators.base import StepState
+    from nsga_jax._integrators.iteration_matrix import ConstantTridiagonal
+    from nsga_jax._integrators.linalg import Tridiagonal
+    from nsga_jax._integrators.operators import generic_operators
     from nsga_jax._simulate import nonfinite_origin
-    from nsga_jax.integrators.base import StepState
-    from nsga_jax.integrators.iteration_matrix import ConstantTridiagonal
-    from nsga_jax.integrators.linalg import Tridiagonal
-    from nsga_jax.integrators.operators import generic_operators
 
     n = 11
     band = jnp.stack([jnp.full(n, -1.0), jnp.full(n, 2.0), jnp.full(n, -1.0)])

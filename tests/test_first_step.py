@@ -1,4 +1,4 @@
-"""The first step's time on the dense path (nsga_jax/first_step.py): counted
+"""The first step's time on the dense path (nsga_jax/_first_step.py): counted
 from the kinds of the iteration matrices, refused before anything is
 compiled when it is estimated above the limit, announced with the compiling
 line when it is long, and run anyway when asked."""
@@ -12,9 +12,10 @@ import pytest
 from reference_models import BouncingBall
 
 import nsga_jax as nj
-from nsga_jax import first_step, memory
-from nsga_jax.chunks import chunk_plan
-from nsga_jax.cli import EXIT_INPUT, main
+from nsga_jax import _first_step as first_step
+from nsga_jax import _memory as memory
+from nsga_jax._chunks import chunk_plan
+from nsga_jax._cli import EXIT_INPUT, main
 from nsga_jax.scenes import load_scene
 
 BALL = BouncingBall(m=1.0, gravity=9.81, e=0.5)
@@ -115,7 +116,7 @@ def test_a_long_first_step_is_announced_and_run_alone_in_the_first_chunk(monkeyp
 
 
 def test_a_slow_run_shows_progress_every_ten_seconds_or_so(monkeypatch):
-    from nsga_jax import progress
+    from nsga_jax import _progress as progress
 
     clock = iter([0.0, 0.0, 26.0, 59.0, 60.0])  # created, compiling, compiled, after the first step; another run
     monkeypatch.setattr(progress.time, "perf_counter", lambda: next(clock))
@@ -153,7 +154,7 @@ def test_a_batch_counts_its_members_and_is_refused_by_name_before_compiling(smal
 def test_every_entry_point_refuses_a_long_first_step_before_compiling(tmp_path, monkeypatch):
     import jax
 
-    from nsga_jax.sweep import sweep
+    from nsga_jax._sweep import sweep
 
     def nothing_compiles(*args, **kwargs):
         raise AssertionError("compilation started before the first-step check")
@@ -192,7 +193,7 @@ def test_the_sweep_command_refuses_in_one_line(tmp_path, capsys):
 
 
 def test_studies_and_identification_take_the_limit(tmp_path, capsys, no_compilation):
-    from nsga_jax.studies import make_reference, study
+    from nsga_jax._studies import make_reference, study
 
     reference = make_reference("bouncing_ball", {}, "exact")
     with pytest.raises(nj.ConfigError, match=r"^the batch: the first step of DS on 1 coordinates \(2 members"):

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax.elements.rigid_body import box_inertia, box_vertices
+from nsga_jax._elements.rigid_body import box_inertia, box_vertices
 from nsga_jax.scenes import load_scene
 from nsga_jax.system import Gravity, PlaneContact, PointMass, RigidBody2D, RigidBody3D, SphereContact, System
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax.cli import main
-from nsga_jax.exact import housner_ratio, incline, rocking_impact_times, rocking_impacts
+from nsga_jax._cli import main
+from nsga_jax._exact import housner_ratio, incline, rocking_impact_times, rocking_impacts
 from nsga_jax.scenes import configure, load_scene
 
 FRICTION_SCENES = ["bouncing_ball", "rigid_box", "flexible_cube", "incline", "rocking_block"]

@@ -18,12 +18,12 @@ import pytest
 from reference_models import BouncingBall, ElasticBar, RigidPendulum
 
 import nsga_jax as nj
+from nsga_jax._chunks import kept_rows
+from nsga_jax._cli import EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED, main
+from nsga_jax._folders import RUN_FILES
 from nsga_jax._simulate import chunk_plan
-from nsga_jax.chunks import kept_rows
-from nsga_jax.cli import EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED, main
-from nsga_jax.folders import RUN_FILES
+from nsga_jax._validation import MAX_STEPS, time_grid
 from nsga_jax.scenes import load_scene
-from nsga_jax.validation import MAX_STEPS, time_grid
 
 BALL = BouncingBall(m=1.0, gravity=9.81, e=0.5)
 
@@ -213,7 +213,7 @@ def test_limits_are_refused_before_anything_runs(tmp_path, capsys, args, match):
 
 def test_ctrl_c_stops_cleanly_and_says_what_was_kept(tmp_path):
     out = tmp_path / "long"
-    proc = subprocess.Popen([sys.executable, "-m", "nsga_jax.cli", "run", "bouncing_ball", "--h", "1e-4",
+    proc = subprocess.Popen([sys.executable, "-m", "nsga_jax._cli", "run", "bouncing_ball", "--h", "1e-4",
                              "--t-end", "1e4", "--record-every", "100", "--chunk", "2048", "--out", str(out)],
                             stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                             env={**os.environ, "NSGA_JAX_CACHE": "off"})

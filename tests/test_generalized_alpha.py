@@ -7,7 +7,7 @@ import pytest
 from helpers import Oscillator
 
 import nsga_jax as nj
-from nsga_jax.metrics import observed_order
+from nsga_jax._metrics import observed_order
 
 
 def test_coefficients_match_eq35():

@@ -10,9 +10,9 @@ import pytest
 
 import nsga_jax as nj
 from nsga_jax import ConfigError
-from nsga_jax.cli import main
-from nsga_jax.fit_steps import COMPASS, compass_search
-from nsga_jax.identify import NOISE_MARGIN, Data, Identification, identify, synthetic_data
+from nsga_jax._cli import main
+from nsga_jax._fit_steps import COMPASS, compass_search
+from nsga_jax._identify import NOISE_MARGIN, Data, Identification, identify, synthetic_data
 
 BALL = {"t_end": 1.0, "h": 2e-3}  # one impact (t ~ 0.45 s), 500 steps
 TRUE = {"e": 0.8, "height": 1.0}
@@ -114,7 +114,7 @@ def test_a_start_30_percent_above_recovers_the_restitution():
 def test_a_fit_stopped_on_a_flat_bound_is_reported_as_failed(monkeypatch, tmp_path, capsys):
     """With unbounded steps the first one lands on the bound e = 0 (no rebound,
     no gradient): the fit must say so, and the command line exit 1."""
-    import nsga_jax.identify as identify_module
+    import nsga_jax._identify as identify_module
 
     monkeypatch.setattr(identify_module, "MAX_STEP", 10.0)
     data = synthetic_data("bouncing_ball", {"e": 0.63}, ["z"])  # the scene's defaults: 3 s at h = 1e-3 s

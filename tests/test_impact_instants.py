@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.batch import simulate_batch
-from nsga_jax.exact import (
+from nsga_jax._batch import simulate_batch
+from nsga_jax._exact import (
     bouncing_ball,
     bouncing_ball_impacts,
     newtons_cradle,
     newtons_cradle_collisions,
     rocking_impact_times,
 )
-from nsga_jax.metrics import energy_through_impacts, first_rebound
+from nsga_jax._metrics import energy_through_impacts, first_rebound
 from nsga_jax.scenes import load_scene, parametrize
 
 G = 9.81
@@ -339,7 +339,7 @@ def test_sweep_convergence_and_identify_carry_the_option(tmp_path):
     import csv
     import json
 
-    from nsga_jax.cli import main
+    from nsga_jax._cli import main
 
     common = ["--grid", "e=0.5;1.0", "--set", "t_end=3", "--set", "rho_inf=1.0", "--h", "1e-3", "--no-plots",
               "--quiet"]
@@ -376,8 +376,8 @@ def test_sweep_convergence_and_identify_carry_the_option(tmp_path):
 def test_hermite_path_interpolates_the_smooth_motion():
     """The cubic the look-ahead falls back on passes through (q, v) at s = 0
     and (q̃, ṽ) at s = span, and is exact for a cubic motion."""
-    from nsga_jax.integrators.base import StepState
-    from nsga_jax.integrators.impact_instants import hermite_path
+    from nsga_jax._integrators.base import StepState
+    from nsga_jax._integrators.impact_instants import hermite_path
 
     motion = lambda s: np.array([1.0 + 2.0 * s - 3.0 * s**2 + 0.5 * s**3, -s**3])  # noqa: E731
     rate = lambda s: np.array([2.0 - 6.0 * s + 1.5 * s**2, -3.0 * s**2])  # noqa: E731

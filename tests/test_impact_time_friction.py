@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.impact_time_friction import frictional_impact
-from nsga_jax.integrators.model_terms import restitution
+from nsga_jax._impact_time_friction import frictional_impact
+from nsga_jax._integrators.model_terms import restitution
 from nsga_jax.scenes import parametrize
 from nsga_jax.system import Gravity, PlaneContact, RigidBody2D, RigidBody3D, System
 

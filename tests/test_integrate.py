@@ -9,7 +9,7 @@ import pytest
 from reference_models import BouncingBall
 
 import nsga_jax as nj
-from nsga_jax.chunks import load_chunks
+from nsga_jax._chunks import load_chunks
 from nsga_jax.scenes import load_scene, parametrize
 
 BALL = BouncingBall(m=1.0, gravity=9.81, e=0.8)

@@ -1,5 +1,5 @@
-"""Large models without assembled matrices (nsga_jax/blocks.py,
-nsga_jax/integrators/krylov.py): the blocks and rows equal the assembled
+"""Large models without assembled matrices (nsga_jax/_blocks.py,
+nsga_jax/_integrators/krylov.py): the blocks and rows equal the assembled
 matrices, the projected bordered solve equals the Schur-complement one, and a
 run of the flexible cube on the matrix-free path equals the dense path's to
 the Newton tolerance, with its gradients (both adjoints), batches and
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax.blocks import NodeRows
-from nsga_jax.elements.hex8 import hex8_internal_force, hex8_stiffness, svk_energy
-from nsga_jax.integrators.iteration_matrix import Held
-from nsga_jax.integrators.krylov import KrylovConstant, KrylovFresh, KrylovHeld, KrylovOperator
-from nsga_jax.integrators.linalg import Factorisation, solve_bordered
-from nsga_jax.memory import dense_matrices, estimate_run_bytes
+from nsga_jax._blocks import NodeRows
+from nsga_jax._elements.hex8 import hex8_internal_force, hex8_stiffness, svk_energy
+from nsga_jax._integrators.iteration_matrix import Held
+from nsga_jax._integrators.krylov import KrylovConstant, KrylovFresh, KrylovHeld, KrylovOperator
+from nsga_jax._integrators.linalg import Factorisation, solve_bordered
+from nsga_jax._memory import dense_matrices, estimate_run_bytes
 from nsga_jax.scenes import load_scene
 
 CUBE = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43}
@@ -305,8 +305,8 @@ def test_memory_estimate_of_the_matrix_free_path_is_linear():
 
 
 def test_a_large_cube_that_cannot_fit_is_refused_naming_the_matrix_free_path(tmp_path, capsys, monkeypatch):
-    from nsga_jax import memory
-    from nsga_jax.cli import main
+    from nsga_jax import _memory as memory
+    from nsga_jax._cli import main
 
     monkeypatch.delenv(memory.SKIP_ENV, raising=False)
     monkeypatch.setattr(memory, "available_memory", lambda: 0.5e9)
@@ -320,7 +320,7 @@ def test_a_large_cube_that_cannot_fit_is_refused_naming_the_matrix_free_path(tmp
 def test_a_sweep_of_a_large_cube_equals_its_single_runs(tmp_path):
     """A sweep batches members on the matrix-free path (1,536 coordinates:
     matrix-free by default) and gives each member's single run."""
-    from nsga_jax.sweep import sweep
+    from nsga_jax._sweep import sweep
 
     overrides = {**CUBE, "divisions": 7, "t_end": 12 * CUBE["h"]}
     result = sweep("flexible_cube", {"E": [80.0, 100.0]}, overrides=overrides, out=tmp_path / "s")

@@ -5,8 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from nsga_jax.integrators.iteration_matrix import ConstantInverse
-from nsga_jax.integrators.linalg import Factorisation, solve_bordered
+from nsga_jax._integrators.iteration_matrix import ConstantInverse
+from nsga_jax._integrators.linalg import Factorisation, solve_bordered
 
 
 def full_matrix(A, Gu, Gl, a, k, p):
@@ -42,7 +42,7 @@ def test_schur_solve_equals_full_bordered_solve(mask, symmetric):
 
 @pytest.mark.parametrize("b", [0, 1, 2])
 def test_band_product_equals_the_dense_product(b):
-    from nsga_jax.integrators.linalg import band_matrix, band_product
+    from nsga_jax._integrators.linalg import band_matrix, band_product
 
     rng = np.random.default_rng(b)
     n = 9
@@ -56,7 +56,7 @@ def test_band_product_equals_the_dense_product(b):
 
 @pytest.mark.parametrize("n", [1, 2, 11, 201])
 def test_tridiagonal_solve_equals_the_dense_solve(n):
-    from nsga_jax.integrators.linalg import Tridiagonal, band_matrix
+    from nsga_jax._integrators.linalg import Tridiagonal, band_matrix
 
     rng = np.random.default_rng(n)
     A = rng.normal(size=(n, n)) + 4.0 * np.eye(n)  # non-symmetric, diagonally dominant
@@ -71,7 +71,7 @@ def test_tridiagonal_solve_equals_the_dense_solve(n):
 def test_tridiagonal_solve_of_a_stiff_chain_matches_lapack_accuracy():
     """c M + K of a free chain (consistent mass, unit springs) with cond ~ 4e6: the
     block elimination's residual is within a small factor of LAPACK's."""
-    from nsga_jax.integrators.linalg import Tridiagonal, band_matrix
+    from nsga_jax._integrators.linalg import Tridiagonal, band_matrix
 
     n, c = 1000, 1e-6
     off = (c / 6 - 1.0) * np.ones(n - 1)
@@ -89,7 +89,7 @@ def test_tridiagonal_solve_of_a_stiff_chain_matches_lapack_accuracy():
 def test_the_bar_solves_its_constant_matrices_by_tridiagonal_elimination():
     import equinox as eqx
 
-    from nsga_jax.integrators.iteration_matrix import ConstantTridiagonal
+    from nsga_jax._integrators.iteration_matrix import ConstantTridiagonal
     from nsga_jax.scenes import load_scene
 
     scene = load_scene("impacting_bar")
@@ -125,7 +125,7 @@ def test_bounded_lapack_batches_chunk_a_vmapped_batch_with_the_same_results(n, c
     matrices one per call, small ones still in one batched call; the results
     are the batched ones."""
     from nsga_jax._compat import LAPACK_WORK_PER_CALL, bounded_lapack_batches
-    from nsga_jax.integrators.linalg import Tridiagonal, band_matrix, dense_solve, masked_solve
+    from nsga_jax._integrators.linalg import Tridiagonal, band_matrix, dense_solve, masked_solve
 
     def work(shape):
         return np.prod(shape[:-2], dtype=int) * shape[-1] ** 3
@@ -167,8 +167,8 @@ def test_redundancy_shift_survives_float32_and_leaves_float64_unchanged(monkeypa
     redundant rows (two contacts sharing a row, as a box's corners on an
     incline share their tangent) was exactly singular there, NaN in the
     compiled solve. float64 keeps the constant 1e-12 itself."""
-    from nsga_jax.integrators import linalg
-    from nsga_jax.integrators.linalg import REDUNDANCY_SHIFT, masked_solve, redundancy_shift
+    from nsga_jax._integrators import linalg
+    from nsga_jax._integrators.linalg import REDUNDANCY_SHIFT, masked_solve, redundancy_shift
 
     assert redundancy_shift(jnp.float64) == REDUNDANCY_SHIFT
     shift32 = redundancy_shift(jnp.float32)

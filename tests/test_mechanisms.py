@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.results import ConfigError
+from nsga_jax._results import ConfigError
 from nsga_jax.scenes import configure, load_scene
 
 BILATERAL_TOL = 1e-8  # joints after every step: Newton tolerance (eq. 51) on metre-sized coordinates

@@ -1,4 +1,4 @@
-"""The memory estimate (nsga_jax/memory.py): calibrated against the peaks
+"""The memory estimate (nsga_jax/_memory.py): calibrated against the peaks
 recorded in docs/performance.md, and a model that cannot fit refused before
 anything is compiled, from Python and from the command line."""
 
@@ -11,10 +11,10 @@ import pytest
 from reference_models import BouncingBall
 
 import nsga_jax as nj
-from nsga_jax import memory
-from nsga_jax.cli import EXIT_INPUT, main
+from nsga_jax import _memory as memory
+from nsga_jax._cli import EXIT_INPUT, main
+from nsga_jax._sweep import sweep
 from nsga_jax.scenes import load_scene
-from nsga_jax.sweep import sweep
 
 RECORDED = {3: (192, 0.65), 5: (648, 0.70), 7: (1536, 0.86), 9: (3000, 1.40), 11: (5184, 2.84)}
 """divisions: (coordinates, peak resident memory [GB]) of the flexible cube,
@@ -149,7 +149,7 @@ def test_a_large_model_runs_in_short_chunks_so_its_progress_shows_within_a_minut
 
 
 def test_progress_says_it_compiles_then_the_time_a_step_and_the_time_left(capsys, monkeypatch):
-    from nsga_jax import progress
+    from nsga_jax import _progress as progress
 
     clock = iter([0.0, 0.0, 26.0, 26.0, 38.0, 38.0])  # created, compiling, compiled (twice), chunk 1 (twice)
     monkeypatch.setattr(progress.time, "perf_counter", lambda: next(clock))

@@ -11,8 +11,8 @@ from helpers import spd_system
 
 import nsga_jax
 from nsga_jax import simulate
-from nsga_jax.integrators.linalg import Factorisation
-from nsga_jax.integrators.newton import Problem, Residual, newton, where_needed
+from nsga_jax._integrators.linalg import Factorisation
+from nsga_jax._integrators.newton import Problem, Residual, newton, where_needed
 from nsga_jax.scenes import REGISTRY, load_scene, make_scheme, parametrize
 
 N = 6
@@ -229,7 +229,7 @@ def test_a_batch_with_held_factorisations_equals_single_runs():
     """Rigid boxes with different restitutions, factorisations held (their
     contacts, and so their refactorings, come at different steps): the batch
     gives each member's single run."""
-    from nsga_jax.batch import BatchRun, stack_models
+    from nsga_jax._batch import BatchRun, stack_models
 
     settings = {"z0": 0.3, "t_end": 0.2, "h": 2e-3}
     scenes = [load_scene("rigid_box", {**settings, "e": e}) for e in (0.2, 0.9)]
@@ -285,7 +285,7 @@ def test_a_stalled_problem_is_restarted_in_its_other_form():
 def test_the_derivative_of_a_restarted_solve_is_the_roots():
     """Through :func:`solve`'s implicit derivative: the root θ found by the
     restart has dx*/dθ = 1."""
-    from nsga_jax.integrators.newton import solve
+    from nsga_jax._integrators.newton import solve
 
     def builder(theta):
         return arctan_root(1.0, 5.0, root=theta)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax.exact import newtons_cradle, newtons_cradle_collisions
+from nsga_jax._exact import newtons_cradle, newtons_cradle_collisions
 from nsga_jax.scenes import configure, load_scene
 
 # ------------------------------------------------------------ exact solution
@@ -165,7 +165,7 @@ def test_a_gap_that_jumps_is_no_impact_in_sequence():
     of 1.5 mm (within twice the approach) is one; one of 1e-11 m (a resting
     contact left open within the position correction's tolerance: it closes
     within 1e-8 of the step) is not."""
-    from nsga_jax.monitors import RunTotals
+    from nsga_jax._monitors import RunTotals
 
     impulse = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])
     for start, chained in ((0.1, 0), (1.5e-3, 1), (1e-11, 0)):

@@ -267,7 +267,7 @@ def cli(tmp_path_factory):
     for name, args in COMMANDS.items():
         out = base / name
         log = open(base / f"{name}.log", "w")
-        procs[name] = (subprocess.Popen([sys.executable, "-m", "nsga_jax.cli", *args, "--out", str(out)], cwd=base,
+        procs[name] = (subprocess.Popen([sys.executable, "-m", "nsga_jax._cli", *args, "--out", str(out)], cwd=base,
                                         env=env, stdout=log, stderr=subprocess.STDOUT), out, log)
 
     def wait(name):

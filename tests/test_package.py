@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from nsga_jax.cli import main
-from nsga_jax.packaged import ROOT as PACKAGE
-from nsga_jax.packaged import locate, packaged, packaged_files
+from nsga_jax._cli import main
+from nsga_jax._packaged import ROOT as PACKAGE
+from nsga_jax._packaged import locate, packaged, packaged_files
 from nsga_jax.scenes import configure, resolve_scene
 
 ROOT = Path(__file__).resolve().parents[1]

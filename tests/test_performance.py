@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from nsga_jax import simulate
-from nsga_jax.bench import COLUMNS, _batched, _bench_scene, bench
-from nsga_jax.compilation_cache import compilation_cache
-from nsga_jax.integrators.linalg import band_product
-from nsga_jax.integrators.records import output_template
-from nsga_jax.results import ConfigError
+from nsga_jax._bench import COLUMNS, _batched, _bench_scene, bench
+from nsga_jax._compilation_cache import compilation_cache
+from nsga_jax._integrators.linalg import band_product
+from nsga_jax._integrators.records import output_template
+from nsga_jax._results import ConfigError
 from nsga_jax.scenes import load_scene
 
 WINDOWS = {

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.exact import rocking_impact_times
+from nsga_jax._exact import rocking_impact_times
 from nsga_jax.scenes import load_scene
 
 

@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 import nsga_jax
-from nsga_jax import plotting
-from nsga_jax.identify import Data, Identification, write_identification
-from nsga_jax.output import plot_iterations, plot_observables, summary, write_run
+from nsga_jax import _plotting as plotting
+from nsga_jax._identify import Data, Identification, write_identification
+from nsga_jax._output import plot_iterations, plot_observables, summary, write_run
+from nsga_jax._studies import Reference, StudyRow, write_study
+from nsga_jax._sweep import SweepResult, plot_sweep
 from nsga_jax.scenes import REGISTRY
-from nsga_jax.studies import Reference, StudyRow, write_study
-from nsga_jax.sweep import SweepResult, plot_sweep
 
 COUNTS = ("iteration", "solves", "steps")
 
@@ -142,12 +142,13 @@ def test_every_scene_observable_has_a_unit():
 def test_importing_nsga_jax_leaves_matplotlib_alone(tmp_path):
     code = f"""
 import sys
-import nsga_jax, nsga_jax.cli, nsga_jax.output, nsga_jax.studies, nsga_jax.sweep, nsga_jax.identify, nsga_jax.plotting
+import nsga_jax, nsga_jax._cli, nsga_jax._output, nsga_jax._studies, nsga_jax._sweep
+import nsga_jax._identify, nsga_jax._plotting
 assert not any(m.startswith("matplotlib") for m in sys.modules), "matplotlib imported"
 import matplotlib
 backend = matplotlib.rcParams._get("backend")
 from tests.test_plots import fake_solution
-nsga_jax.output.plot_observables(fake_solution(["z"]), {str(tmp_path / "o.png")!r}, "bouncing_ball")
+nsga_jax._output.plot_observables(fake_solution(["z"]), {str(tmp_path / "o.png")!r}, "bouncing_ball")
 assert "matplotlib.pyplot" not in sys.modules
 assert matplotlib.rcParams._get("backend") == backend
 """

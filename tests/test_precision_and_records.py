@@ -11,8 +11,8 @@ import pytest
 from reference_models import BouncingBall
 
 import nsga_jax as nj
-from nsga_jax.chunks import load_chunks
-from nsga_jax.cli import main
+from nsga_jax._chunks import load_chunks
+from nsga_jax._cli import main
 from nsga_jax.scenes import load_scene
 
 # ------------------------------------------------------------ strided records
@@ -82,7 +82,7 @@ def test_float32_with_friction_is_warned_by_name():
     frictionless or float64 run is not."""
     import jax
 
-    from nsga_jax.precision import cast_floats, precision_notes
+    from nsga_jax._precision import cast_floats, precision_notes
 
     stack = load_scene("box_stack", {"dim": 2, "n_boxes": 2, "t_end": 0.002})
     with pytest.warns(nj.PrecisionWarning, match="float32 with Coulomb friction: a sticking contact may creep"):
@@ -102,12 +102,12 @@ def test_integrate_refuses_float32_states_with_a_float64_model_by_name():
     """integrate takes the model and scheme as given: float32 q0 and v0 with
     float64 parameters would mix precisions inside the loop (a raw TypeError
     of the scan); refused before tracing, naming the parameter and the cast."""
-    from nsga_jax.precision import cast_floats
+    from nsga_jax import cast_floats
 
     ball = load_scene("bouncing_ball")
     q0, v0 = np.asarray(ball.q0, np.float32), np.asarray(ball.v0, np.float32)
     with pytest.raises(nj.ConfigError, match=r"q0 and v0 are float32 but the model's parameter model\.\w+.* "
-                                             r"is float64: cast both with nsga_jax\.precision\.cast_floats"):
+                                             r"is float64: cast both with nsga_jax\.cast_floats"):
         nj.integrate(ball.model, ball.scheme(), 0.0, 0.01, 1e-3, q0, v0)
     model = cast_floats(ball.model, "float32")
     with pytest.raises(nj.ConfigError, match=r"the scheme's parameter scheme\.\w+"):
@@ -144,8 +144,8 @@ def test_float32_run_computes_in_float32_with_x64_on(name):
     import jax
     import jax.numpy as jnp
 
+    from nsga_jax import cast_floats
     from nsga_jax._run_core import prepare_and_init, run_chunk
-    from nsga_jax.precision import cast_floats
 
     assert jax.config.jax_enable_x64
     scene = load_scene(name)
@@ -212,7 +212,7 @@ def test_importing_nsga_jax_changes_no_global_state():
     code = (
         "import os, jax\n"
         "before = (jax.config.jax_enable_x64, os.environ.get('XLA_FLAGS'))\n"
-        "import nsga_jax as nj, nsga_jax._simulate, nsga_jax.batch, nsga_jax.system, nsga_jax.scenes\n"
+        "import nsga_jax as nj, nsga_jax._simulate, nsga_jax._batch, nsga_jax.system, nsga_jax.scenes\n"
         "scene = nsga_jax.scenes.load_scene('bouncing_ball', {'t_end': 0.01})\n"
         "assert (jax.config.jax_enable_x64, os.environ.get('XLA_FLAGS')) == before == (False, None), before\n"
         "try:\n    scene.run()\nexcept nj.ConfigError as err:\n    print('refused:', err)\n"

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.packaged import packaged
+from nsga_jax._packaged import packaged
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -256,7 +256,7 @@ def test_the_pages_show_commands():
 
 @pytest.mark.parametrize("page, words", COMMANDS, ids=[f"{p}: nsga-jax {' '.join(w)}"[:100] for p, w in COMMANDS])
 def test_command_parses_with_the_current_options(page, words):
-    from nsga_jax.cli import command_parser
+    from nsga_jax._cli import command_parser
     from nsga_jax.scenes import load_scene, parse_override
 
     args = command_parser().parse_args(words)  # an unknown option exits with status 2

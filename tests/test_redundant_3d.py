@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.models.redundancy import RedundantConstraintsWarning, bilateral_redundancy
+from nsga_jax._models.redundancy import RedundantConstraintsWarning, bilateral_redundancy
 from nsga_jax.system import Pin, Revolute, RigidBody2D, RigidBody3D, System
 
 H = 1e-3

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax.integrators.linalg import multiplier_rtol
-from nsga_jax.integrators.model_terms import consistent_acceleration
-from nsga_jax.models.redundancy import RedundantConstraintsWarning, bilateral_redundancy
-from nsga_jax.precision import cast_floats
+from nsga_jax._integrators.linalg import multiplier_rtol
+from nsga_jax._integrators.model_terms import consistent_acceleration
+from nsga_jax._models.redundancy import RedundantConstraintsWarning, bilateral_redundancy
+from nsga_jax._precision import cast_floats
 from nsga_jax.scenes import load_scene
 from nsga_jax.system import Distance, Pin, RigidBody2D, System, Weld
 
@@ -201,7 +201,7 @@ def test_the_command_line_prints_the_redundancy_once_in_its_own_words(tmp_path):
     where Python shows every warning (``-W default``)."""
     path = tmp_path / "twice.toml"
     path.write_text(TWICE_PINNED)
-    proc = subprocess.run([sys.executable, "-W", "default", "-m", "nsga_jax.cli", "run", str(path), "--out",
+    proc = subprocess.run([sys.executable, "-W", "default", "-m", "nsga_jax._cli", "run", str(path), "--out",
                            str(tmp_path / "out"), "--quiet", "--no-cache"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     lines = [line for line in proc.stderr.splitlines() if "redundant bilateral constraints" in line]
@@ -212,8 +212,8 @@ def test_the_command_line_prints_the_redundancy_once_in_its_own_words(tmp_path):
 def test_a_sweep_reports_the_redundancy_once_before_it_runs(tmp_path, monkeypatch, capsys, scene_registry):
     """From Python: warned once and kept in ``SweepResult.warnings``; from the
     command line: one ``warning:`` line, as for a run."""
-    from nsga_jax.cli import main
-    from nsga_jax.sweep import sweep
+    from nsga_jax._cli import main
+    from nsga_jax._sweep import sweep
 
     path = tmp_path / "twice.toml"
     path.write_text(TWICE_PINNED)

@@ -9,8 +9,8 @@ import pytest
 from helpers import Oscillator
 
 import nsga_jax as nj
-from nsga_jax.integrators.records import first_failure
-from nsga_jax.results import FAILURES, RESULTS, SUBPROBLEM_LABELS, Result, code_of, from_code
+from nsga_jax._integrators.records import first_failure
+from nsga_jax._results import FAILURES, RESULTS, SUBPROBLEM_LABELS, Result, code_of, from_code
 from nsga_jax.scenes import load_scene
 
 
@@ -114,8 +114,8 @@ def test_the_differentiable_trajectory_raises_the_members_message():
 
 
 def test_iteration_plots_name_each_schemes_subproblems(ball_runs, tmp_path):
-    from nsga_jax import plotting
-    from nsga_jax.output import plot_iterations
+    from nsga_jax import _plotting as plotting
+    from nsga_jax._output import plot_iterations
 
     titles = {"ds": ["smooth motion", "position correction", "velocity jump"],
               "cs": ["coupled (CS) iteration"], "mj": ["Moreau–Jean (velocity-level)"]}

@@ -90,9 +90,9 @@ def test_cs_reports_divergence_or_cap_with_a_named_error():
 def test_scheme_names_are_one_list():
     """Configs, the command line and nj.SCHEMES name the schemes from one list,
     and each class carries its own name."""
-    from nsga_jax.integrators import scheme_class
-    from nsga_jax.scenes.params import SOLVER_PARAMS
-    from nsga_jax.validation import SCHEME_NAMES
+    from nsga_jax._integrators import scheme_class
+    from nsga_jax._scenes.params import SOLVER_PARAMS
+    from nsga_jax._validation import SCHEME_NAMES
 
     assert tuple(nj.SCHEMES) == SCHEME_NAMES == SOLVER_PARAMS["scheme"].choices
     assert all(scheme_class(name).name == name and nj.SCHEMES[name] is scheme_class(name) for name in SCHEME_NAMES)

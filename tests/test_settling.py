@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from nsga_jax.integrators.linalg import minimum_norm_split
+from nsga_jax._integrators.linalg import minimum_norm_split
 from nsga_jax.scenes import load_scene
 
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import nsga_jax
+from nsga_jax._system.contacts import tangent_basis
 from nsga_jax.scenes import load_scene
 from nsga_jax.system import FaceContact, RigidBody2D, RigidBody3D
-from nsga_jax.system.contacts import tangent_basis
 
 STACK = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "systems" / "stacked_boxes.toml"
 
@@ -156,8 +156,8 @@ def test_the_step_that_cycled_converges_without_a_restart(monkeypatch, restarts)
     converges, with or without restarts, in the same iterations: the cycle
     was a path through those degenerate contacts. (The restarts themselves
     are tested on their own problems in test_newton.py.)"""
-    from nsga_jax.integrators import friction
-    from nsga_jax.integrators.base import StepState
+    from nsga_jax._integrators import friction
+    from nsga_jax._integrators.base import StepState
 
     if not restarts:
         monkeypatch.setattr(friction, "RESTART_PENALTIES", ())

@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from nsga_jax.integrators.base import StepState
-from nsga_jax.integrators.impact_instants import keep_accelerations_if_short
+from nsga_jax._integrators.base import StepState
+from nsga_jax._integrators.impact_instants import keep_accelerations_if_short
 from nsga_jax.scenes import load_scene
 
 

@@ -1,5 +1,5 @@
 """Block elimination of the bordered iteration matrices of systems of bodies
-(nsga_jax/integrators/structured.py, block_tridiagonal.py): the block
+(nsga_jax/_integrators/structured.py, block_tridiagonal.py): the block
 elimination against dense solves, the layouts a chain, a shuffled chain, a
 ring and a star get, the bordered correction against the Schur complement
 of linalg.solve_bordered, and whole runs against the dense path
@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax import batch
-from nsga_jax.integrators import structured
-from nsga_jax.integrators.block_tridiagonal import block_inverse, dense_of, solve_block_tridiagonal
-from nsga_jax.integrators.linalg import Factorisation, solve_bordered
-from nsga_jax.integrators.structured import MIN_BLOCKS, Structured, StructuredFactorisation, block_layout
-from nsga_jax.models.coupling import BodyCoupling
+from nsga_jax import _batch as batch
+from nsga_jax._integrators import structured
+from nsga_jax._integrators.block_tridiagonal import block_inverse, dense_of, solve_block_tridiagonal
+from nsga_jax._integrators.linalg import Factorisation, solve_bordered
+from nsga_jax._integrators.structured import MIN_BLOCKS, Structured, StructuredFactorisation, block_layout
+from nsga_jax._models.coupling import BodyCoupling
 from nsga_jax.system import Pin, PlaneContact, Revolute, RigidBody2D, RigidBody3D, System
 
 LENGTH, MASS = 0.2, 0.5

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from nsga_jax.cli import main
+from nsga_jax._cli import main
+from nsga_jax._studies import make_reference, run_step_sizes, slopes, study
 from nsga_jax.scenes import load_scene
-from nsga_jax.studies import make_reference, run_step_sizes, slopes, study
 
 
 @pytest.mark.timeout(300)

@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.batch import broadcast_members, member_mesh, needs_bounded_lapack_batches
-from nsga_jax.cli import main
-from nsga_jax.metrics import relative_l1_error
-from nsga_jax.results import ConfigError
+from nsga_jax._batch import broadcast_members, member_mesh, needs_bounded_lapack_batches
+from nsga_jax._cli import main
+from nsga_jax._metrics import relative_l1_error
+from nsga_jax._results import ConfigError
+from nsga_jax._sweep import parse_grid, sweep
 from nsga_jax.scenes import REGISTRY, load_scene
-from nsga_jax.sweep import parse_grid, sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMING = {"batch_wall_s"}
@@ -116,7 +116,7 @@ KILLED_SWEEP = """
 import os, signal
 import jax
 jax.config.update("jax_enable_x64", True)
-from nsga_jax.sweep import sweep
+from nsga_jax._sweep import sweep
 
 def kill_after_first(k, rows):
     if k == 0:
@@ -149,8 +149,8 @@ def test_killed_sweep_resumes_to_the_same_table(tmp_path):
 SHARDED_SWEEP = """
 import jax
 jax.config.update("jax_enable_x64", True)
-from nsga_jax.batch import needs_bounded_lapack_batches, member_mesh
-from nsga_jax.sweep import sweep
+from nsga_jax._batch import needs_bounded_lapack_batches, member_mesh
+from nsga_jax._sweep import sweep
 assert len(jax.devices()) == 2, jax.devices()
 assert needs_bounded_lapack_batches(member_mesh())
 sweep({name!r}, {grid!r}, hs={hs!r}, overrides={overrides!r}, out={out!r}, batch_size=4)
@@ -190,7 +190,7 @@ def sweep_on_two_processes(outs: tuple[Path, Path], *args: str) -> list[subproce
     folder for both is a shared file system; two are two hosts' own disks)."""
     port = free_port()
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    cmd = [sys.executable, "-m", "nsga_jax.cli", "sweep", *args, "--quiet", "--no-cache",
+    cmd = [sys.executable, "-m", "nsga_jax._cli", "sweep", *args, "--quiet", "--no-cache",
            "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2"]
     procs = [subprocess.Popen([*cmd, "--out", str(outs[i]), "--process-id", str(i)], cwd=ROOT, env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]

@@ -9,14 +9,14 @@ import jax
 import numpy as np
 import pytest
 
-from nsga_jax.batch import stack_models
-from nsga_jax.grid import members
-from nsga_jax.results import ConfigError
+from nsga_jax._batch import stack_models
+from nsga_jax._grid import members
+from nsga_jax._results import ConfigError
+from nsga_jax._scenes.params import positive
+from nsga_jax._scenes.spec import SceneSpec
+from nsga_jax._sweep import sweep
+from nsga_jax._sweep_build import build_batch, structural_floats, traced_structure
 from nsga_jax.scenes import REGISTRY, configure, load_scene
-from nsga_jax.scenes.params import positive
-from nsga_jax.scenes.spec import SceneSpec
-from nsga_jax.sweep import sweep
-from nsga_jax.sweep_build import build_batch, structural_floats, traced_structure
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -98,7 +98,7 @@ def test_bar_sweep_equals_single_runs(grid):
 def test_the_batches_of_one_structure_compile_once():
     """Three batches of one structure add at most the two programs of a batch
     (preparation, chunk) to the compiled programs, not two per batch."""
-    from nsga_jax import batch
+    from nsga_jax import _batch as batch
 
     before = len(batch._EXECUTABLES)
     res = sweep("bouncing_ball", {"e": [0.5, 0.7, 0.9]}, overrides={"t_end": 0.05, "height": 0.37}, batch_size=1)

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nsga_jax.cli import EXIT_INPUT, main
-from nsga_jax.results import ConfigError
+from nsga_jax._cli import EXIT_INPUT, main
+from nsga_jax._results import ConfigError
+from nsga_jax._system.catalog import CATALOG, fields
 from nsga_jax.scenes import REGISTRY, configure, load_scene, parametrize
 from nsga_jax.system import PlaneContact, PointMass, RigidBody2D, System, TorsionalSpring
-from nsga_jax.system.catalog import CATALOG, fields
 
 SYSTEMS = Path(__file__).resolve().parents[1] / "nsga_jax" / "configs" / "systems"
 BALL = SYSTEMS / "ball_between_walls.toml"
@@ -296,7 +296,7 @@ def test_a_flexible_body_has_structural_parameters_and_a_tip(tmp_path):
 
 
 def test_bench_takes_a_system_file():
-    from nsga_jax.cli import _bench_scene
+    from nsga_jax._cli import _bench_scene
 
     assert _bench_scene(str(CHAIN)) == "spring_chain"
     assert _bench_scene("bouncing_ball") == "bouncing_ball"

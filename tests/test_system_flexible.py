@@ -12,8 +12,8 @@ from reference_models import ElasticBar, PlanarBeam
 from reference_models import HexSolid as HexModel
 
 import nsga_jax as nj
-from nsga_jax.assembly import StaticIndex
-from nsga_jax.elements.hex8 import structured_hex_mesh
+from nsga_jax._assembly import StaticIndex
+from nsga_jax._elements.hex8 import structured_hex_mesh
 from nsga_jax.scenes import load_scene, parametrize
 from nsga_jax.system import Bar, Beam2D, HexSolid, PlaneContact, System
 

@@ -11,7 +11,7 @@ import pytest
 from reference_models import BouncingBall, RigidBody, RigidPendulum
 
 import nsga_jax as nj
-from nsga_jax.elements.rigid_body import box_inertia, box_vertices
+from nsga_jax._elements.rigid_body import box_inertia, box_vertices
 from nsga_jax.scenes import load_scene
 from nsga_jax.system import Ground, Pin, PointMass, Revolute, RigidBody3D, System, Weld3D
 

@@ -10,8 +10,8 @@ import pytest
 from reference_models import BouncingBall, RigidPendulum
 
 import nsga_jax as nj
+from nsga_jax._validation import check_model_fields
 from nsga_jax.scenes import REGISTRY, load_scene
-from nsga_jax.validation import check_model_fields
 
 pytestmark = pytest.mark.usefixtures("no_compilation")  # (tests/conftest.py)
 

@@ -56,9 +56,9 @@ def measure(scene_name: str) -> dict:
     import jax.numpy as jnp
 
     import nsga_jax as nj
+    from nsga_jax._precision import cast_floats
     from nsga_jax._run_core import prepare_and_init, run_chunk
     from nsga_jax._simulate import chunk_length
-    from nsga_jax.precision import cast_floats
 
     scene = nj.load_scene(scene_name)
     dtype = scene.solver["dtype"]
@@ -101,11 +101,11 @@ def main() -> None:
     parser.add_argument("--cache", help=argparse.SUPPRESS)  # the child's persistent compilation cache
     args = parser.parse_args()
     if args.one:
-        from nsga_jax.process_settings import configure_jax
+        from nsga_jax._process_settings import configure_jax
 
         configure_jax()
         if args.cache:
-            from nsga_jax.compilation_cache import use_compilation_cache
+            from nsga_jax._compilation_cache import use_compilation_cache
 
             use_compilation_cache(args.cache)
         print(json.dumps(measure(args.one)))

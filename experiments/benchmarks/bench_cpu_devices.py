@@ -24,13 +24,13 @@ import sys
 
 MEASURE = r"""
 import json, sys
-from nsga_jax.process_settings import configure_jax
+from nsga_jax._process_settings import configure_jax
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 import jax
 import numpy as np
-from nsga_jax.batch import BatchRun, broadcast_members, member_mesh
-from nsga_jax.bench import _bench_scene
-from nsga_jax.validation import step_count as _n_steps
+from nsga_jax._batch import BatchRun, broadcast_members, member_mesh
+from nsga_jax._bench import _bench_scene
+from nsga_jax._validation import step_count as _n_steps
 name, B = sys.argv[1], int(sys.argv[2])
 scene = _bench_scene(name, {"scheme": "ds"}, 2000)
 n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])

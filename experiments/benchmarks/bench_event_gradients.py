@@ -16,8 +16,8 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import nsga_jax  # noqa: E402
-from nsga_jax.adjoint import adjoint_named  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._adjoint import adjoint_named  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import parametrize  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

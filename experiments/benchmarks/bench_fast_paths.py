@@ -27,9 +27,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from nsga_jax import simulate  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._tables import write_csv  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
-from nsga_jax.tables import write_csv  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

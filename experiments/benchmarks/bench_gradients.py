@@ -23,7 +23,7 @@ from pathlib import Path
 
 import jax
 
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

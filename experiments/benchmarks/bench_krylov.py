@@ -34,7 +34,7 @@ import jax
 jax.config.update("jax_enable_x64", sys.argv[4] == "float64")
 import numpy as np
 import nsga_jax
-from nsga_jax.memory import estimate_run_bytes
+from nsga_jax._memory import estimate_run_bytes
 d, path, out = int(sys.argv[1]), sys.argv[2], sys.argv[3]
 scene = nsga_jax.load_scene("flexible_cube", {"divisions": d, "height": 0.0501, "velocity": -1.0,
                                               "h": 1e-4, "t_end": float(sys.argv[5]) * 1e-4})

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import jax
 
-from nsga_jax.process_settings import configure_jax
+from nsga_jax._process_settings import configure_jax
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
@@ -36,8 +36,8 @@ import jax.scipy.sparse.linalg as jsp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
-from nsga_jax.elements.hex8 import hex8_internal_force, hex8_stiffness, svk_energy  # noqa: E402
-from nsga_jax.integrators.krylov import (  # noqa: E402
+from nsga_jax._elements.hex8 import hex8_internal_force, hex8_stiffness, svk_energy  # noqa: E402
+from nsga_jax._integrators.krylov import (  # noqa: E402
     MAX_STEPS,
     kronecker_mass,
     mass_preconditioner,

@@ -3,7 +3,7 @@
 failed steps, Newton iterations of the position correction (mean / max), the
 final tilt, the drift of the coordinates over the last 10 s, the largest
 energy above the start, and the impacts (landings: θ changes sign) against
-the exact solution's (:func:`~nsga_jax.exact.rocking_impact_times`) while
+the exact solution's (:func:`~nsga_jax._exact.rocking_impact_times`) while
 they are resolvable (the interval since the last one at least
 ``RESOLVABLE`` steps): how many, and the largest error of their times (a
 landing is seen at the record after it: up to one step), printed as a
@@ -24,8 +24,8 @@ import argparse
 
 import numpy as np
 
-from nsga_jax.exact import rocking_impact_times
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._exact import rocking_impact_times
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

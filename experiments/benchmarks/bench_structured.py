@@ -23,7 +23,7 @@ from pathlib import Path
 
 import jax
 
-from nsga_jax.process_settings import configure_jax
+from nsga_jax._process_settings import configure_jax
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 
@@ -35,8 +35,8 @@ def correction_us(model, q0, repeats: int) -> tuple[float, float]:
     """µs of one bordered correction: (block elimination, dense LU + Schur complement)."""
     import jax.numpy as jnp
 
-    from nsga_jax.integrators import structured
-    from nsga_jax.integrators.linalg import Factorisation, solve_bordered
+    from nsga_jax._integrators import structured
+    from nsga_jax._integrators.linalg import Factorisation, solve_bordered
 
     A, G = model.mass(q0), model.constraint_jacobian(q0)
     r1, r2 = jnp.ones(model.n_dof), jnp.ones(model.n_constraints)
@@ -68,7 +68,7 @@ def correction_us(model, q0, repeats: int) -> tuple[float, float]:
 def run_us(model, q0, v0, structured_on: bool, steps: int, repeats: int) -> tuple[float, float, str]:
     """µs per step and compile [s] of DS with the block elimination on or off."""
     import nsga_jax as nj
-    from nsga_jax.integrators import structured
+    from nsga_jax._integrators import structured
 
     structured.MIN_BLOCKS = 1 if structured_on else 10**9
     structured.block_layout.cache_clear()
@@ -91,7 +91,7 @@ def main() -> None:
               "| DS step, dense [µs] | compile, blocks / dense [s] |")
     rows = []
     print(header, flush=True)
-    from nsga_jax.integrators import structured
+    from nsga_jax._integrators import structured
 
     for n in args.links:
         model, q0, v0 = chain(n)

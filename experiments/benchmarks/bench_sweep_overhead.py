@@ -37,17 +37,17 @@ GRIDS = {
     "impacting_bar": ({"e": np.linspace(0.1, 0.9, 32), "E": np.linspace(800, 1000, 32)}, {"t_end": 0.2}),
 }
 PHASES = {  # name in the table: the profiled function (file suffix, function name)
-    "validate members (grid.members)": ("grid.py", "members"),
-    "build members' models one by one": ("scenes/spec.py", "build"),
-    "group by structure (split_batches)": ("sweep_build.py", "split_batches"),
-    "build the batches' models (build_batch)": ("sweep_build.py", "build_batch"),
-    "stack models": ("batch.py", "stack_models"),
-    "batches incl. compile (BatchRun)": ("batch.py", "__init__"),
-    "join the records to the initial rows (joined_records)": ("batch.py", "joined_records"),
-    "observables (sweep_build)": ("sweep_build.py", "observables_of"),
-    "rows (_row)": ("sweep_batches.py", "_row"),
-    "member solutions": ("batch.py", "member_solution"),
-    "plot": ("sweep.py", "plot_sweep"),
+    "validate members (grid.members)": ("_grid.py", "members"),
+    "build members' models one by one": ("_scenes/spec.py", "build"),
+    "group by structure (split_batches)": ("_sweep_build.py", "split_batches"),
+    "build the batches' models (build_batch)": ("_sweep_build.py", "build_batch"),
+    "stack models": ("_batch.py", "stack_models"),
+    "batches incl. compile (BatchRun)": ("_batch.py", "__init__"),
+    "join the records to the initial rows (joined_records)": ("_batch.py", "joined_records"),
+    "observables (sweep_build)": ("_sweep_build.py", "observables_of"),
+    "rows (_row)": ("_sweep_batches.py", "_row"),
+    "member solutions": ("_batch.py", "member_solution"),
+    "plot": ("_sweep.py", "plot_sweep"),
 }
 
 
@@ -57,7 +57,7 @@ def main() -> None:
     parser.add_argument("--out", default="experiments/out/sweep_overhead")
     args = parser.parse_args()
     nj.configure_jax()
-    from nsga_jax.sweep import sweep
+    from nsga_jax._sweep import sweep
 
     grid, overrides = GRIDS[args.scene]
     out = Path(args.out)

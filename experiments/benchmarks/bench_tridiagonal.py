@@ -19,9 +19,9 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from nsga_jax.bench import per_call  # noqa: E402
-from nsga_jax.integrators.linalg import Tridiagonal, band_matrix  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._bench import per_call  # noqa: E402
+from nsga_jax._integrators.linalg import Tridiagonal, band_matrix  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

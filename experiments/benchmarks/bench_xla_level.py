@@ -40,9 +40,9 @@ def measure(scene_name: str, steps: int) -> dict:
     import numpy as np
 
     import nsga_jax as nj
+    from nsga_jax._precision import cast_floats
     from nsga_jax._run_core import prepare_and_init, run_chunk
     from nsga_jax._simulate import chunk_length
-    from nsga_jax.precision import cast_floats
 
     scene = nj.load_scene(scene_name)
     dtype = scene.solver["dtype"]
@@ -91,7 +91,7 @@ def main() -> None:
     parser.add_argument("--one", help=argparse.SUPPRESS)  # the child process: measure this scene, print JSON
     args = parser.parse_args()
     if args.one:
-        from nsga_jax.process_settings import configure_jax
+        from nsga_jax._process_settings import configure_jax
 
         configure_jax()
         print(json.dumps(measure(args.one, args.steps)))

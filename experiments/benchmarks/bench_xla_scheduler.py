@@ -25,7 +25,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from nsga_jax.tables import read_csv, write_csv
+from nsga_jax._tables import read_csv, write_csv
 
 FLAG = "--xla_cpu_enable_concurrency_optimized_scheduler"
 SETTINGS = {"off": f"{FLAG}=false", "on": f"{FLAG}=true"}
@@ -36,7 +36,7 @@ def one_run(scene: str, setting: str, batches: str, steps: int) -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="nsga_jax_xla_") as tmp:
         env = {**os.environ, "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} {SETTINGS[setting]}".strip(),
                "NSGA_JAX_CACHE": "off"}
-        subprocess.run([sys.executable, "-m", "nsga_jax.cli", "bench", "--scenes", scene, "--batch", batches,
+        subprocess.run([sys.executable, "-m", "nsga_jax._cli", "bench", "--scenes", scene, "--batch", batches,
                         "--max-steps", str(steps), "--repeats", "3", "--out", tmp], env=env, check=True,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=900)
         return [{**row, "scheduler": setting} for row in read_csv(Path(tmp) / "bench.csv")]

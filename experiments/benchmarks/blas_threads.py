@@ -34,7 +34,7 @@ CASES = {
 
 def run(scene: str, threads: str, cache: str, out: str) -> float:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": threads, "NSGA_JAX_CACHE": cache}
-    proc = subprocess.run([sys.executable, "-m", "nsga_jax.cli", "run", scene, *CASES[scene], "--out", out,
+    proc = subprocess.run([sys.executable, "-m", "nsga_jax._cli", "run", scene, *CASES[scene], "--out", out,
                            "--overwrite", "--quiet"], env=env, capture_output=True, text=True, timeout=900)
     found = re.search(r"\(([\d.]+) us/step\)", proc.stdout)
     if proc.returncode != 0 or not found:

@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from nsga_jax.process_settings import configure_jax
+from nsga_jax._process_settings import configure_jax
 from nsga_jax.scenes import load_scene
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from nsga_jax import plotting
-from nsga_jax.process_settings import configure_jax  # noqa: E402
-from nsga_jax.studies import Reference, StudyRow, make_reference, slopes, study, write_study
-from nsga_jax.tables import read_csv
+from nsga_jax import _plotting as plotting
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._studies import Reference, StudyRow, make_reference, slopes, study, write_study
+from nsga_jax._tables import read_csv
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

@@ -18,8 +18,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 from _paper import FIGURES, arguments, finish, run_study  # noqa: E402
 
-from nsga_jax import plotting  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax import _plotting as plotting  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import REGISTRY, load_scene  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

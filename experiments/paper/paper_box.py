@@ -11,8 +11,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from _paper import finish, output_dir, run_study  # noqa: E402
 
-from nsga_jax.process_settings import configure_jax  # noqa: E402
-from nsga_jax.studies import slopes  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._studies import slopes  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

@@ -11,7 +11,7 @@ above it, x8, as well.
 
 ``--divisions N`` reruns the study on a finer mesh (the paper's has 5
 divisions, 648 coordinates). From 1,000 coordinates DS and DSn take the
-matrix-free path (:mod:`nsga_jax.integrators.krylov`); CS and MJ stay dense,
+matrix-free path (:mod:`nsga_jax._integrators.krylov`); CS and MJ stay dense,
 so a finer mesh runs DS and DSn unless ``--schemes`` says otherwise. Its
 results and figures are named for the mesh (paper_cube_d<N>,
 paper_flexible_cube_<N>_divisions_*.png).
@@ -30,8 +30,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from _paper import finish, run_study  # noqa: E402
 
-from nsga_jax.process_settings import configure_jax  # noqa: E402
-from nsga_jax.studies import slopes  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._studies import slopes  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

@@ -44,10 +44,10 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
-from nsga_jax import plotting  # noqa: E402
-from nsga_jax.adjoint import adjoint_named  # noqa: E402
-from nsga_jax.exact import bouncing_ball, rigid_pendulum  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax import _plotting as plotting  # noqa: E402
+from nsga_jax._adjoint import adjoint_named  # noqa: E402
+from nsga_jax._exact import bouncing_ball, rigid_pendulum  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene, parametrize  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

@@ -43,10 +43,10 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
-from nsga_jax.elements.rigid_body import box_inertia, box_vertices  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._elements.rigid_body import box_inertia, box_vertices  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._tables import write_csv  # noqa: E402
 from nsga_jax.system import Gravity, PlaneContact, RigidBody2D, RigidBody3D, System  # noqa: E402
-from nsga_jax.tables import write_csv  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

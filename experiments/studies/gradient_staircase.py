@@ -28,9 +28,9 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import nsga_jax  # noqa: E402
-from nsga_jax import plotting  # noqa: E402
-from nsga_jax.exact import bouncing_ball  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax import _plotting as plotting  # noqa: E402
+from nsga_jax._exact import bouncing_ball  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import parametrize  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

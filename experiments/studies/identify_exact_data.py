@@ -24,10 +24,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from nsga_jax.adjoint import adjoint_named  # noqa: E402
-from nsga_jax.exact import bouncing_ball, rigid_pendulum  # noqa: E402
-from nsga_jax.identify import Data, identify, synthetic_data  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._adjoint import adjoint_named  # noqa: E402
+from nsga_jax._exact import bouncing_ball, rigid_pendulum  # noqa: E402
+from nsga_jax._identify import Data, identify, synthetic_data  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

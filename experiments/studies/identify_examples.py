@@ -29,8 +29,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import jax  # noqa: E402
 
 import nsga_jax as nj  # noqa: E402
-from nsga_jax.identify import Data, identify, synthetic_data, write_identification  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._identify import Data, identify, synthetic_data, write_identification  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

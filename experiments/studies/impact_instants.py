@@ -51,13 +51,13 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 
 configure_jax()
 
 import nsga_jax as nj  # noqa: E402
-from nsga_jax.exact import bouncing_ball, newtons_cradle, rocking_impact_times  # noqa: E402
-from nsga_jax.metrics import energy_through_impacts, first_rebound  # noqa: E402
+from nsga_jax._exact import bouncing_ball, newtons_cradle, rocking_impact_times  # noqa: E402
+from nsga_jax._metrics import energy_through_impacts, first_rebound  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[2] / "docs" / "results" / "impact_instants"

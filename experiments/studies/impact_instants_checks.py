@@ -36,7 +36,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 
 configure_jax()
 

@@ -16,8 +16,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from nsga_jax.process_settings import configure_jax  # noqa: E402
-from nsga_jax.tables import write_csv
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._tables import write_csv
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

@@ -2,7 +2,7 @@
 
     python experiments/studies/readme_figures.py [--out docs/figures]
 
-Drawn with the package's figure style (nsga_jax.plotting): units from each
+Drawn with the package's figure style (nsga_jax._plotting): units from each
 scene's SceneSpec.units, titles naming the scene, the scheme and h.
 """
 
@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from nsga_jax import plotting
-from nsga_jax.exact import bouncing_ball
-from nsga_jax.metrics import observed_order, relative_l1_error
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax import _plotting as plotting
+from nsga_jax._exact import bouncing_ball
+from nsga_jax._metrics import observed_order, relative_l1_error
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import REGISTRY, load_scene
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

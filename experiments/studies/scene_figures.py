@@ -4,7 +4,7 @@
 
 Each scene at its defaults with DS, against its exact (cradle) or
 event-driven (double pendulum) reference; drawn with the package's figure
-style (nsga_jax.plotting).
+style (nsga_jax._plotting).
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from nsga_jax import plotting
-from nsga_jax.exact_pendulums import double_pendulum, double_pendulum_energy
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax import _plotting as plotting
+from nsga_jax._exact_pendulums import double_pendulum, double_pendulum_energy
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them

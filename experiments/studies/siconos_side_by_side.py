@@ -13,7 +13,7 @@ stops (exit status 0). Both codes get the same matrices: the bar's consistent
 mass and stiffness are assembled by nsga_jax and handed to Siconos as a
 ``LagrangianLinearTIDS`` with the tip constraint ``gap0 - u_tip >= 0``.
 
-Exact solutions: the ball's is closed-form (:func:`nsga_jax.exact.bouncing_ball`);
+Exact solutions: the ball's is closed-form (:func:`nsga_jax._exact.bouncing_ball`);
 the bar's is the continuum one, the d'Alembert solution of a uniform bar hitting
 a rigid wall at speed v0 (a compression wave from the tip, reflected at the free
 end, unloads the bar, which leaves at -v0 after 2L/c of contact; c = sqrt(E/ρ)),
@@ -46,11 +46,11 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from nsga_jax.exact import bouncing_ball  # noqa: E402
-from nsga_jax.metrics import relative_l1_error  # noqa: E402
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._exact import bouncing_ball  # noqa: E402
+from nsga_jax._metrics import relative_l1_error  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._tables import write_csv  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
-from nsga_jax.tables import write_csv  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

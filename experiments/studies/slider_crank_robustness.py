@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from nsga_jax import plotting
-from nsga_jax.metrics import relative_l1_error
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax import _plotting as plotting
+from nsga_jax._metrics import relative_l1_error
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._studies import make_reference, run_step_sizes
+from nsga_jax._tables import write_csv
 from nsga_jax.scenes import load_scene
-from nsga_jax.studies import make_reference, run_step_sizes
-from nsga_jax.tables import write_csv
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

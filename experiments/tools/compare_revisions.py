@@ -46,14 +46,14 @@ sys.path.insert(0, sys.argv[1])
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ["JAX_ENABLE_X64"] = "1"  # float64 (a revision that turns it on at import does too)
 import numpy as np
-from nsga_jax.bench import _bench_scene
+from nsga_jax._bench import _bench_scene
 scene = _bench_scene(sys.argv[2], {"scheme": "ds"}, 2000)
 runs = [scene.run(dtype="float64", throw=False) for _ in range(4)]
 row = {"us_per_step": min(1e6 * r.wall_time / r.n_steps for r in runs), "compile_s": runs[0].compile_time}
 batch = int(sys.argv[3])
 if batch > 1:
-    from nsga_jax.batch import BatchRun, broadcast_members
-    from nsga_jax.validation import step_count as _n_steps
+    from nsga_jax._batch import BatchRun, broadcast_members
+    from nsga_jax._validation import step_count as _n_steps
     n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
     cpu = time.process_time()
     run = BatchRun(broadcast_members(scene.model, batch), scene.scheme(), 0.0, np.tile(scene.q0, (batch, 1)),

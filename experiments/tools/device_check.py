@@ -40,10 +40,10 @@ import jax
 import numpy as np
 
 import nsga_jax
-from nsga_jax.bench import bench, markdown
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._bench import bench, markdown
+from nsga_jax._process_settings import configure_jax  # noqa: E402
+from nsga_jax._sweep import sweep
 from nsga_jax.scenes import load_scene
-from nsga_jax.sweep import sweep
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

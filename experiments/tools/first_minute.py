@@ -19,7 +19,7 @@ CHILD = """
 import sys, time
 import jax
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 import nsga_jax
 n, steps = int(sys.argv[1]), int(sys.argv[2])
 t0 = time.perf_counter()

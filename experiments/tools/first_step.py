@@ -4,8 +4,8 @@ Each case runs in its own process: the flexible cube (falling freely from
 0.35 m, h = 3e-5 s) by DS on its dense path (``krylov_min_dof=None``) and
 by CS, one step in a chunk of one. The measured time is the solution's
 ``wall_time`` (the constant operators' preparation and the step, the
-compilation apart); the estimate is :func:`nsga_jax.first_step.estimate_first_step`
-at the LU rate measured in the same process (:func:`nsga_jax.first_step.lu_rate`):
+compilation apart); the estimate is :func:`nsga_jax._first_step.estimate_first_step`
+at the LU rate measured in the same process (:func:`nsga_jax._first_step.lu_rate`):
 
     PYTHONPATH=$PWD python experiments/tools/first_step.py 6 8 10
 """
@@ -19,9 +19,9 @@ CHILD = """
 import sys
 import jax
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 import nsga_jax
-from nsga_jax.first_step import estimate_first_step, lu_rate
+from nsga_jax._first_step import estimate_first_step, lu_rate
 n, scheme = int(sys.argv[1]), sys.argv[2]
 scene = nsga_jax.load_scene("flexible_cube", {"divisions": n, "h": 3e-5, "t_end": 3e-5})
 s = nsga_jax.DS(krylov_min_dof=None) if scheme == "ds" else nsga_jax.CS()

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
 
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 

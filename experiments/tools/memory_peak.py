@@ -2,7 +2,7 @@
 
 Each size runs in its own process (``os.wait4`` gives that child's maximum
 resident set size); the table compares it with
-:func:`nsga_jax.memory.estimate_run_bytes`. The cube starts just above the floor moving down
+:func:`nsga_jax._memory.estimate_run_bytes`. The cube starts just above the floor moving down
 (height = side/2 + 1e-4 m, -1 m/s) so that every sub-problem (smooth motion,
 position correction, velocity jump) runs within the few steps measured;
 h = 1e-4 s. Run ONE size at a time on a shared machine:
@@ -20,7 +20,7 @@ CHILD = """
 import sys
 import jax
 configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
-from nsga_jax.process_settings import configure_jax  # noqa: E402
+from nsga_jax._process_settings import configure_jax  # noqa: E402
 import nsga_jax
 n = int(sys.argv[1])
 scene = nsga_jax.load_scene("flexible_cube", {"divisions": n, "height": 0.0501, "velocity": -1.0,
@@ -57,7 +57,7 @@ def machine() -> str:
 
 def main(sizes: list[int]) -> None:
     from nsga_jax import DS, load_scene
-    from nsga_jax.memory import estimate_run_bytes
+    from nsga_jax._memory import estimate_run_bytes
 
     print(machine())
     print()

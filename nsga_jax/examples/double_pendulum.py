@@ -65,8 +65,7 @@ import jax
 import jax.numpy as jnp
 
 import nsga_jax
-from nsga_jax.scenes import Param, SceneSpec, register
-from nsga_jax.validation import POSITIVE, UNIT_INTERVAL, Range
+from nsga_jax.scenes import POSITIVE, UNIT_INTERVAL, Param, Range, SceneSpec, register
 
 
 def as_float(x) -> jax.Array:

@@ -7,12 +7,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from nsga_jax._assembly import ElementGroup, StaticIndex
 from nsga_jax._custom_types import Matrix, Scalar, Vector
+from nsga_jax._elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
+from nsga_jax._models.base import Model, count_rule
 from nsga_jax._util import as_float
-from nsga_jax.assembly import ElementGroup, StaticIndex
-from nsga_jax.elements.bar import bar_consistent_mass, bar_internal_force, bar_lumped_mass
-from nsga_jax.models.base import Model, count_rule
-from nsga_jax.validation import POSITIVE, UNIT_INTERVAL
+from nsga_jax._validation import POSITIVE, UNIT_INTERVAL
 
 
 class ElasticBar(Model):

@@ -8,12 +8,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from nsga_jax._assembly import ElementGroup, StaticIndex
 from nsga_jax._custom_types import Matrix, Scalar, Vector
+from nsga_jax._elements.beam2d import beam_energy, beam_internal_force, beam_mass
+from nsga_jax._models.base import Model, count_rule
 from nsga_jax._util import as_float
-from nsga_jax.assembly import ElementGroup, StaticIndex
-from nsga_jax.elements.beam2d import beam_energy, beam_internal_force, beam_mass
-from nsga_jax.models.base import Model, count_rule
-from nsga_jax.validation import POSITIVE, UNIT_INTERVAL, Range
+from nsga_jax._validation import POSITIVE, UNIT_INTERVAL, Range
 
 from .rules import side_rule
 

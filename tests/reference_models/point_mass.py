@@ -7,9 +7,9 @@ import jax
 import jax.numpy as jnp
 
 from nsga_jax._custom_types import Matrix, Scalar, Vector
+from nsga_jax._models import Model
 from nsga_jax._util import as_float
-from nsga_jax.models import Model
-from nsga_jax.validation import POSITIVE, UNIT_INTERVAL
+from nsga_jax._validation import POSITIVE, UNIT_INTERVAL
 
 from .rules import side_rule
 

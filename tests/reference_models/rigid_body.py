@@ -8,8 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from nsga_jax._custom_types import Matrix, Scalar, Vector
-from nsga_jax._util import as_float
-from nsga_jax.elements.rigid_body import (
+from nsga_jax._elements.rigid_body import (
     angular_velocity,
     frame,
     natural_mass_matrix,
@@ -17,8 +16,9 @@ from nsga_jax.elements.rigid_body import (
     rigidity_constraints,
     second_moments,
 )
-from nsga_jax.models import Model
-from nsga_jax.validation import POSITIVE, UNIT_INTERVAL
+from nsga_jax._models import Model
+from nsga_jax._util import as_float
+from nsga_jax._validation import POSITIVE, UNIT_INTERVAL
 
 
 class RigidBody(Model):

@@ -7,12 +7,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from nsga_jax._assembly import ElementGroup, StaticIndex
 from nsga_jax._custom_types import Matrix, Scalar, Vector
+from nsga_jax._elements.hex8 import hex8_body_force, hex8_geometry, hex8_internal_force, hex8_mass, lame, svk_energy
+from nsga_jax._models import Model
 from nsga_jax._util import as_float
-from nsga_jax.assembly import ElementGroup, StaticIndex
-from nsga_jax.elements.hex8 import hex8_body_force, hex8_geometry, hex8_internal_force, hex8_mass, lame, svk_energy
-from nsga_jax.models import Model
-from nsga_jax.validation import POSITIVE, UNIT_INTERVAL, Range
+from nsga_jax._validation import POSITIVE, UNIT_INTERVAL, Range
 
 
 class HexSolid(Model):
