@@ -2,14 +2,16 @@
 node by node, for large flexible models solved without assembling
 (:attr:`~nsga_jax._models.Model.matrix_free`, :mod:`~nsga_jax._integrators.krylov`).
 
-A system is matrix-free when it is one body that gives element blocks and
-node coordinates (a :class:`~nsga_jax.system.HexSolid` or a
-:class:`~nsga_jax.system.Bar`), with forces that
-do not depend on the state (gravity), no joints, and only frictionless
-:class:`~nsga_jax.system.PlaneContact` s on its nodes, no node in two
+A system is matrix-free when its bodies are flexible bodies of one kind that
+give element blocks and node coordinates (:class:`~nsga_jax.system.HexSolid` s,
+or :class:`~nsga_jax.system.Bar` s), with forces that do not depend on the
+state (gravity), no joints, and only frictionless
+:class:`~nsga_jax.system.PlaneContact` s on their nodes, no node in two
 contacts: each contact row is then the plane's unit normal on one node's
-coordinates, and the rows are orthonormal. Derived from the parts, never
-declared.
+coordinates, and the rows are orthonormal. Several bodies are one matrix
+whose element blocks are the bodies' blocks on their coordinates (block
+diagonal: nothing couples them but the contacts' rows). Derived from the
+parts, never declared.
 """
 
 from __future__ import annotations
@@ -24,17 +26,35 @@ from . import layout
 from .contacts import PlaneContact, node_indices
 
 
-def _contact_nodes(model) -> list[tuple[int, ...]]:
-    body = model.bodies[0]
-    return [node_indices(body, c.nodes) for c in model.contacts]
+def _offsets(model) -> list[int]:
+    """Where each body's coordinates start in the system's (static)."""
+    slices = layout.body_slices(model)
+    return [slices[name].start for name in model.body_names]
+
+
+def _body_coordinates(model, q: Vector) -> list[Vector]:
+    """Each body's slice of q."""
+    slices = layout.body_slices(model)
+    return [q[slices[name]] for name in model.body_names]
+
+
+def _contact_dofs(model) -> list[np.ndarray]:
+    """Each contact's nodes as the system's coordinates, shape (k, w) each (static)."""
+    slices = layout.body_slices(model)
+    out = []
+    for contact in model.contacts:
+        body = layout.body(model, contact.body)
+        out.append(slices[contact.body].start + body.node_dofs(node_indices(body, contact.nodes)))
+    return out
 
 
 def is_matrix_free(model) -> bool:
     """Whether the system's matrices can be left as element blocks and its rows node by node (static)."""
-    if len(model.bodies) != 1 or model.joints or model.n_bilateral:
+    if not model.bodies or model.joints or model.n_bilateral:
         return False
-    body = model.bodies[0]
-    if not (hasattr(body, "element_stiffness") and hasattr(body, "node_dofs")):
+    if len({type(body) for body in model.bodies}) != 1:  # one kind: one element block size and node width
+        return False
+    if not all(hasattr(body, "element_stiffness") and hasattr(body, "node_dofs") for body in model.bodies):
         return False
     if not model.constant_mass or model.velocity_dependent_force:
         return False
@@ -42,35 +62,44 @@ def is_matrix_free(model) -> bool:
         return False
     if any(not isinstance(c, PlaneContact) or c.nodes is None or c.frictional for c in model.contacts):
         return False
-    nodes = [i % body.n_nodes for group in _contact_nodes(model) for i in group]
-    return len(set(nodes)) == len(nodes)
+    dofs = [tuple(row) for group in _contact_dofs(model) for row in group]
+    return len(set(dofs)) == len(dofs)
+
+
+def _stacked(model, blocks: list[ElementMatrix]) -> ElementMatrix:
+    """The bodies' element blocks as one matrix on the system's coordinates."""
+    if len(blocks) == 1:
+        return blocks[0]
+    dofs = np.concatenate([offset + b.dofs.array for offset, b in zip(_offsets(model), blocks)])
+    return ElementMatrix(jnp.concatenate([b.blocks for b in blocks]), StaticIndex(dofs), model.n_dof,
+                         blocks[0].width)
 
 
 def element_mass(model, q: Vector) -> ElementMatrix:
-    """M of the system's one body, element by element."""
-    return model.bodies[0].element_mass(q)
+    """M of the system, element by element."""
+    return _stacked(model, [body.element_mass(qb) for body, qb in zip(model.bodies, _body_coordinates(model, q))])
 
 
 def kronecker_mass(model):
-    """The system's one body's M as a Kronecker product where it has one (a box solid), else ``None``."""
+    """The system's M as a Kronecker product where it has one (one box solid), else ``None``."""
     body = model.bodies[0]
-    return body.kronecker_mass() if hasattr(body, "kronecker_mass") else None
+    return body.kronecker_mass() if len(model.bodies) == 1 and hasattr(body, "kronecker_mass") else None
 
 
 def element_stiffness(model, q: Vector) -> ElementMatrix:
-    """K(q) of the system's one body (gravity adds none), element by element."""
-    return model.bodies[0].element_stiffness(q)
+    """K(q) of the system (gravity adds none), element by element."""
+    return _stacked(model, [body.element_stiffness(qb)
+                            for body, qb in zip(model.bodies, _body_coordinates(model, q))])
 
 
 def constraint_rows(model, q: Vector) -> NodeRows:
     """The contacts' rows: each plane's unit normal on its nodes' coordinates, shape (nc, n)."""
-    body = model.bodies[0]
     cols, vals = [], []
-    for contact, nodes in zip(model.contacts, _contact_nodes(model)):
-        cols.append(body.node_dofs(nodes))
+    for contact, dofs in zip(model.contacts, _contact_dofs(model)):
+        cols.append(dofs)
         normal = (contact.normal / jnp.linalg.norm(contact.normal)).astype(q.dtype)
-        vals.append(jnp.broadcast_to(normal, (len(nodes), normal.shape[0])))
-    width = body.dim
+        vals.append(jnp.broadcast_to(normal, (len(dofs), normal.shape[0])))
+    width = model.bodies[0].dim
     if not cols:
         return NodeRows(jnp.zeros((0, width), q.dtype), StaticIndex(np.zeros((0, width))), model.n_dof)
     return NodeRows(jnp.concatenate(vals), StaticIndex(np.concatenate(cols)), model.n_dof)
