@@ -108,10 +108,22 @@ class NodeRows(eqx.Module):
         return _TransposedRows(self)
 
     def orthonormal(self) -> bool:
-        """Whether no two rows share a column (static), so that rows of unit
-        norm are orthonormal."""
-        cols = self.cols.array.ravel()
-        return len(np.unique(cols)) == len(cols)
+        """Whether the rows' supports make them orthonormal when each row has
+        unit norm and a node's rows are orthogonal (static): rows that share a
+        column share all their columns (one node's), at most w of them (a
+        node's coordinate axes: a pinned node), else no two rows share a
+        column (one contact a node). :func:`~nsga_jax.check_model` checks
+        G Gᵀ = I on the values."""
+        cols = self.cols.array
+        if cols.shape[0] == 0:
+            return True
+        supports, counts = np.unique(np.sort(cols, axis=1), axis=0, return_counts=True)
+        flat = supports.ravel()
+        return len(np.unique(flat)) == len(flat) and int(counts.max()) <= cols.shape[1]
+
+    def rows(self, start: int, stop: int) -> "NodeRows":
+        """Rows ``start`` to ``stop`` (static), as ``G[start:stop]`` of a dense array."""
+        return NodeRows(self.vals[start:stop], StaticIndex(self.cols.array[start:stop]), self.n)
 
     def dense(self) -> Matrix:
         """The rows as a dense (m, n) array, for checks on small models."""

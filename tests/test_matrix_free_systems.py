@@ -1,20 +1,23 @@
 """The matrix-free path (nsga_jax/_system/matrix_free.py,
-nsga_jax/_integrators/krylov.py) on systems of several flexible bodies:
-the stacked element blocks and the contact rows equal the assembled
-matrices and the constraint Jacobian, the switch follows the parts (one kind
-of body), and two cubes landing on a floor run as on the dense path, to
-the Newton tolerance, with the same contacts closing."""
+nsga_jax/_integrators/krylov.py) on systems of several flexible bodies and
+with joints: the stacked element blocks and the rows (pins' and contacts')
+equal the assembled matrices and the constraint Jacobian, the switch follows
+the parts, and two cubes landing on a floor and a clamped beam whose tip
+falls onto a floor run as on the dense path, to the Newton tolerance, with
+the same contacts closing, the pins held, and the same gradients."""
 
 from __future__ import annotations
 
 import dataclasses
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import nsga_jax
 from nsga_jax._integrators.krylov import KRYLOV_KINDS
-from nsga_jax.system import Gravity, HexSolid, PlaneContact, RigidBody3D, System
+from nsga_jax.system import Distance, Gravity, HexSolid, Pin, PlaneContact, RigidBody3D, System
 
 SIDE, E, NU, RHO = 0.1, 90.0, 0.3, 1.0  # the flexible_cube scene's soft cube
 
@@ -74,3 +77,89 @@ def test_two_cubes_landing_match_the_dense_path():
     closed = np.asarray(dense.records.active_velocity)
     np.testing.assert_array_equal(np.asarray(krylov.records.active_velocity), closed)
     assert closed[:, :9].any() and closed[:, 9:].any()  # both cubes land within the window
+
+
+def clamped_beam(E=1e4, distance: bool = False):
+    """A 0.3 m beam of six hexahedra clamped at x = 0 (each node of its left
+    face pinned to the ground) and sagging under gravity, its tip's lower
+    edge 0.5 mm above a floor; ``distance``: one clamp a rod instead (not
+    affine: the dense path)."""
+    beam = HexSolid(size=jnp.array([0.3, 0.05, 0.05]), divisions=(6, 1, 1), E=E, nu=0.3, rho=1000.0,
+                    position=jnp.array([0.15, 0.0, 0.0255]))
+    system = System(dim=3)
+    system.add_body("beam", beam)
+    reference = beam.reference_nodes
+    for i, node in enumerate(beam.node_set("left")):
+        system.add_joint(f"clamp_{i}", Pin("ground", "beam", at_a=reference[node], node_b=node))
+    if distance:
+        system.add_joint("rod", Distance("ground", "beam", at_a=[0.3, 0.0, 1.0], node_b=beam.node(-1, 0, -1),
+                                         length=1.0 - 0.0505))
+    tip = (beam.node(-1, 0, 0), beam.node(-1, -1, 0))
+    system.add_contact("floor", PlaneContact("beam", normal=[0.0, 0.0, 1.0], origin=[0.0, 0.0, 0.0], e=0.0, nodes=tip))
+    system.add_force("gravity", Gravity(jnp.array([0.0, 0.0, -9.81])))
+    return system.model()
+
+
+def test_pinned_nodes_rows_are_the_coordinate_axes():
+    model = clamped_beam()
+    assert model.matrix_free and model.n_bilateral == 12
+    q0, _ = model.initial_state()
+    rows = model.constraint_rows(q0)
+    assert rows.orthonormal() and rows.shape == (14, model.n_dof)
+    np.testing.assert_allclose(rows.dense(), model.constraint_jacobian(q0), rtol=0, atol=1e-15)
+    nsga_jax.check_model(model)
+    assert not clamped_beam(distance=True).matrix_free  # a rod's row is not affine
+
+
+def test_a_pinned_node_in_a_contact_keeps_the_dense_path():
+    """A node pinned and in a contact: its rows would not be orthonormal."""
+    beam = HexSolid(size=jnp.full((3,), 0.1), divisions=(1, 1, 1), E=E, nu=NU, rho=RHO)
+    system = System(dim=3)
+    system.add_body("cube", beam)
+    system.add_joint("pin", Pin("ground", "cube", at_a=np.asarray(beam.reference_nodes)[0], node_b=0))
+    system.add_contact("floor", PlaneContact("cube", normal=[0.0, 0.0, 1.0], origin=[0.0, 0.0, -0.1], e=0.0,
+                                                nodes="bottom"))
+    assert not system.model().matrix_free
+
+
+@pytest.mark.parametrize("scheme", [nsga_jax.DS(), nsga_jax.DSn()], ids=["ds", "dsn"])
+def test_clamped_beam_matches_the_dense_path(scheme):
+    """The tip falls onto the floor and stays (e = 0); the clamp holds to
+    round-off on both paths, whose trajectories agree to the Newton tolerance."""
+    model = clamped_beam()
+    q0, v0 = model.initial_state()
+    kinds = dataclasses.replace(scheme, krylov_min_dof=0).matrix_kinds(model)
+    assert all(issubclass(kind, KRYLOV_KINDS) for kind in kinds)
+    krylov, dense = [nsga_jax.simulate(model, dataclasses.replace(scheme, krylov_min_dof=k), 0.0, 0.03, 2e-4, q0, v0)
+                     for k in (0, None)]
+    assert krylov.failed_steps.size == 0 and dense.failed_steps.size == 0
+    scale = float(np.abs(dense.q).max())
+    np.testing.assert_allclose(krylov.q, dense.q, rtol=0, atol=10 * float(scheme.tol_r) * scale)
+    closed = np.asarray(dense.records.active_velocity)[:, 12:]
+    np.testing.assert_array_equal(np.asarray(krylov.records.active_velocity)[:, 12:], closed)
+    assert closed.any(axis=0).all() and closed[-1].all()  # the tip's edge lands and stays
+    clamped = np.concatenate([np.arange(3 * n, 3 * n + 3) for n in (0, 7, 14, 21)])  # the left face's nodes
+    assert np.abs(krylov.q[:, clamped] - q0[clamped]).max() < 1e-12
+    assert np.abs(krylov.q[-1] - q0).max() > 4e-3  # the beam has sagged onto the floor
+
+
+@pytest.mark.slow
+def test_gradient_through_the_clamped_beam_matches_the_dense_path():
+    """d/dE of a node's final height near the clamp (where the clamp's
+    bending wave has reached in 10 ms), both paths, against central differences."""
+    scheme = nsga_jax.DS(tol_r=1e-10, tol_f=1e-10)
+    node = 3 * 1 + 2  # z of node (1, 0, 0), 5 cm from the clamp
+
+    def height(E, k):
+        model = clamped_beam(E)
+        q0, v0 = model.initial_state()
+        sol = nsga_jax.integrate(model, dataclasses.replace(scheme, krylov_min_dof=k), 0.0, 0.01, 2e-4, q0, v0,
+                                 n_steps=50)
+        return sol.q[-1, node]
+
+    grads = {k: float(jax.jit(jax.grad(lambda E: height(E, k)))(1e4)) for k in (0, None)}
+    step = 10.0
+    fd = (float(height(1e4 + step, 0)) - float(height(1e4 - step, 0))) / (2 * step)
+    assert abs(grads[None]) * 1e4 > 1e-5  # E dz/dE [m]: far above the Newton tolerance
+    np.testing.assert_allclose(grads[0], grads[None], rtol=1e-6)
+    np.testing.assert_allclose(grads[0], fd, rtol=1e-4)

@@ -213,9 +213,14 @@ class DS(AbstractGenAlpha):
             q0, v0 = jnp.asarray(q0, real), jnp.asarray(v0, real)
             preconditioner = mass_preconditioner(kronecker_mass(model, real), 1.0)
             M = model.element_mass(q0).node_blocks() if preconditioner is None else preconditioner.mass
-            solve = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real), linear_tolerance(self.tol_r, real),
-                                      preconditioner).solve
-            vd0 = consistent_acceleration(model, t0, q0, v0, solve)
+            mass = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real), linear_tolerance(self.tol_r, real),
+                                     preconditioner)
+            if model.n_bilateral:  # pinned nodes: M v̇ = f + G_Bᵀ λ, G_B v̇ = 0, by the projected solve
+                GB = model.constraint_rows(q0).rows(0, model.n_bilateral)
+                vd0 = mass.bordered(-model.force(q0, v0, t0), jnp.zeros((model.n_bilateral,), real), GB, GB,
+                                    jnp.ones((model.n_bilateral,), bool), jnp.ones((), real), jnp.zeros((), real))[0]
+            else:
+                vd0 = consistent_acceleration(model, t0, q0, v0, mass.solve)
             state = StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
         if state is None:
             state = super().init(model, t0, q0, v0)

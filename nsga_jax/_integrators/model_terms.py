@@ -287,20 +287,24 @@ class VaryingJacobian(AbstractConstraintJacobian):
 
 class RowsJacobian(AbstractConstraintJacobian):
     """The constant g_q of a matrix-free model's affine constraints as
-    node-local rows (:class:`~nsga_jax._assembly.NodeRows`), without bilaterals.
+    node-local rows (:class:`~nsga_jax._blocks.NodeRows`).
 
     Attributes:
         G: g_q, (nc, n) as rows.
+        n_bilateral: nb, its first rows being g_q^B (pinned nodes) (static).
     """
 
     G: NodeRows
+    n_bilateral: int = eqx.field(static=True, default=0)
     is_constant: ClassVar[bool] = True
 
     def jacobian(self, model: Model, q: Vector) -> NodeRows:  # type: ignore[override]
         return self.G
 
-    def bilateral(self, model: Model, q: Vector) -> jax.Array:
-        return jnp.zeros((0, self.G.n), q.dtype)
+    def bilateral(self, model: Model, q: Vector) -> jax.Array | NodeRows:  # type: ignore[override]
+        if self.n_bilateral == 0:
+            return jnp.zeros((0, self.G.n), q.dtype)
+        return self.G.rows(0, self.n_bilateral)
 
 
 class ConstantJacobian(AbstractConstraintJacobian):

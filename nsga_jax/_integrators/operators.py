@@ -236,7 +236,7 @@ def matrix_free_operators(model: Model, t0: Scalar, kinds: MatrixKinds,
     if model.n_constraints:
         G = model.constraint_rows(zeros)
         assert G.orthonormal(), "a matrix-free model's rows share no coordinate"
-        constraints = RowsJacobian(G)
+        constraints = RowsJacobian(G, model.n_bilateral)
 
     def build(kind: type[AbstractIterationMatrix], top_left: TopLeft | None) -> AbstractIterationMatrix:
         if kind in (KrylovFresh, KrylovHeld):

@@ -103,7 +103,7 @@ def smooth_problem(inputs: SmoothInputs) -> Problem:
             return (-matrix.solve(res.r, res.bound), jnp.zeros((0,), vt.dtype)), floor
         GB = ops.constraints.bilateral(model, q)
         floor = floor + constraint_floor(ks, GB, vt)
-        G_low = GB + c_q * convective(model, q, vt, bilateral_only=True)
+        G_low = GB if model.linear_constraints else GB + c_q * convective(model, q, vt, bilateral_only=True)
         dv, dlam = matrix.bordered(res.r[:n], res.r[n:], GB, G_low, jnp.ones((nb,), bool), ks, ps)
         return (dv, dlam), floor
 

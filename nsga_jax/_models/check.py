@@ -225,12 +225,11 @@ class Capability(NamedTuple):
 def _check_matrix_free(model: Model, states, masses, stiffness, jacobians, fail) -> None:
     """A matrix-free model's element blocks and node rows against its dense
     M, K and g_q, and the structure the iterative path relies on: a constant
-    mass, no damping, affine constraints, no bilaterals, no friction, rows
-    that share no coordinate and have unit norm."""
+    mass, no damping, affine constraints, no friction, orthonormal rows."""
     for flag, ok in (("constant_mass", model.constant_mass),
                      ("velocity_dependent_force", not model.velocity_dependent_force),
                      ("linear_constraints", model.linear_constraints or model.n_constraints == 0),
-                     ("n_bilateral", model.n_bilateral == 0), ("n_friction", model.n_friction == 0)):
+                     ("n_friction", model.n_friction == 0)):
         if not ok:
             fail("matrix_free", f"declared True, but {flag} rules it out")
     for (qs, _), M, K in zip(states, masses, stiffness):
@@ -253,8 +252,10 @@ def _check_matrix_free(model: Model, states, masses, stiffness, jacobians, fail)
         rows = model.constraint_rows(states[0][0])
         if _differ(rows.dense(), jacobians[0]) > RELATIVE:
             fail("constraint_rows", f"differ from g_q by {_differ(rows.dense(), jacobians[0]):.2e} (relative)")
-        if not rows.orthonormal() or np.abs(np.linalg.norm(np.asarray(rows.vals), axis=1) - 1.0).max() > RELATIVE:
-            fail("constraint_rows", "must have unit norm and share no coordinate (one contact a node)")
+        dense = np.asarray(rows.dense())
+        if not rows.orthonormal() or np.abs(dense @ dense.T - np.eye(dense.shape[0])).max() > RELATIVE:
+            fail("constraint_rows", "must be orthonormal: unit norm, and no coordinate shared but by a node's "
+                                    "orthogonal rows (one contact a node, or a pinned node's axes)")
 
 
 def _check_friction(model: Model, qs, fail) -> None:

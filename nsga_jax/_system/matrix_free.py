@@ -5,16 +5,21 @@ node by node, for large flexible models solved without assembling
 A system is matrix-free when its bodies are flexible bodies of one kind that
 give element blocks and node coordinates (:class:`~nsga_jax.system.HexSolid` s,
 or :class:`~nsga_jax.system.Bar` s), with forces that do not depend on the
-state (gravity), no joints, and only frictionless
+state (gravity), joints that pin nodes to the ground
+(:class:`~nsga_jax.system.Pin` between ``ground`` and a node: a clamped face
+is one pin a node), and only frictionless
 :class:`~nsga_jax.system.PlaneContact` s on their nodes, no node in two
-contacts: each contact row is then the plane's unit normal on one node's
-coordinates, and the rows are orthonormal. Several bodies are one matrix
+contacts or pins: each contact row is then the plane's unit normal on one
+node's coordinates, a pin's rows ± the coordinate axes on its node's, and
+the rows are orthonormal. Several bodies are one matrix
 whose element blocks are the bodies' blocks on their coordinates (block
 diagonal: nothing couples them but the contacts' rows). Derived from the
 parts, never declared.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -23,13 +28,20 @@ from .._assembly import StaticIndex
 from .._blocks import ElementMatrix, NodeRows
 from .._custom_types import Vector
 from . import layout
+from .base import GROUND
 from .contacts import PlaneContact, node_indices
+from .joints import Pin
 
 
 def _offsets(model) -> list[int]:
     """Where each body's coordinates start in the system's (static)."""
     slices = layout.body_slices(model)
     return [slices[name].start for name in model.body_names]
+
+
+def _flexible(model, name: str) -> Any:
+    """The body ``name``: a flexible body with ``node_dofs`` (checked by :func:`is_matrix_free`)."""
+    return layout.body(model, name)
 
 
 def _body_coordinates(model, q: Vector) -> list[Vector]:
@@ -43,14 +55,37 @@ def _contact_dofs(model) -> list[np.ndarray]:
     slices = layout.body_slices(model)
     out = []
     for contact in model.contacts:
-        body = layout.body(model, contact.body)
+        body = _flexible(model, contact.body)
         out.append(slices[contact.body].start + body.node_dofs(node_indices(body, contact.nodes)))
+    return out
+
+
+def _pinned_node(joint) -> tuple[str, int, float] | None:
+    """(body, node, sign of its rows) of a pin holding a node to the ground, else ``None`` (static)."""
+    if type(joint) is not Pin:
+        return None
+    if joint.body_a == GROUND and joint.node_b is not None and joint.body_b != GROUND:
+        return joint.body_b, joint.node_b, -1.0  # g = x_a - x_b
+    if joint.body_b == GROUND and joint.node_a is not None and joint.body_a != GROUND:
+        return joint.body_a, joint.node_a, 1.0
+    return None
+
+
+def _pin_dofs(model) -> list[tuple[np.ndarray, float]]:
+    """Each pin's node as the system's coordinates, shape (1, w), and its rows' sign (static)."""
+    slices = layout.body_slices(model)
+    out = []
+    for joint in model.joints:
+        name, node, sign = _pinned_node(joint)  # type: ignore[misc]
+        out.append((slices[name].start + _flexible(model, name).node_dofs((node,)), sign))
     return out
 
 
 def is_matrix_free(model) -> bool:
     """Whether the system's matrices can be left as element blocks and its rows node by node (static)."""
-    if not model.bodies or model.joints or model.n_bilateral:
+    if not model.bodies or any(body.n_bilateral for body in model.bodies):
+        return False
+    if any(_pinned_node(joint) is None for joint in model.joints):
         return False
     if len({type(body) for body in model.bodies}) != 1:  # one kind: one element block size and node width
         return False
@@ -63,6 +98,7 @@ def is_matrix_free(model) -> bool:
     if any(not isinstance(c, PlaneContact) or c.nodes is None or c.frictional for c in model.contacts):
         return False
     dofs = [tuple(row) for group in _contact_dofs(model) for row in group]
+    dofs += [tuple(node[0]) for node, _ in _pin_dofs(model)]
     return len(set(dofs)) == len(dofs)
 
 
@@ -93,8 +129,14 @@ def element_stiffness(model, q: Vector) -> ElementMatrix:
 
 
 def constraint_rows(model, q: Vector) -> NodeRows:
-    """The contacts' rows: each plane's unit normal on its nodes' coordinates, shape (nc, n)."""
+    """The constraints' rows, shape (nc, n): each pin's ± coordinate axes on its
+    node's coordinates (the bilateral rows, first), then each plane's unit
+    normal on its nodes' coordinates."""
     cols, vals = [], []
+    for dofs, sign in _pin_dofs(model):
+        width = dofs.shape[1]
+        cols.append(np.repeat(dofs, width, axis=0))
+        vals.append(sign * jnp.eye(width, dtype=q.dtype))
     for contact, dofs in zip(model.contacts, _contact_dofs(model)):
         cols.append(dofs)
         normal = (contact.normal / jnp.linalg.norm(contact.normal)).astype(q.dtype)
