@@ -130,6 +130,17 @@ VECTOR_COPIES = 60
 """Vectors of n numbers the same run holds: state, predictor, residuals and
 conjugate-gradient work vectors of three sub-problems."""
 
+FRICTION_ROW_COPIES = 8
+"""With Coulomb friction, arrays of m × n numbers (m = nc + nf · d contact
+rows) the matrix-free path holds: the rows spelled out, A⁻¹ Gᵀ and the
+work vectors of its m conjugate-gradient solves, batched
+(:func:`~nsga_jax._integrators.friction.dense_rows`); and
+:data:`FRICTION_SYSTEM_COPIES` arrays of (2m)² numbers, the contact law's
+Newton system and its SVD. Both counted from the arrays a step forms, not
+fitted on measured peaks as :data:`BLOCK_COPIES` is."""
+
+FRICTION_SYSTEM_COPIES = 6
+
 
 def assembles_nothing(kinds) -> bool:
     from ._integrators.krylov import KRYLOV_KINDS
@@ -141,7 +152,8 @@ def matrix_free_numbers(model: Model, scheme: AbstractScheme) -> int:
     """Numbers a run that assembles no matrix (:mod:`~nsga_jax._integrators.krylov`)
     holds at its peak, per member: :data:`BLOCK_COPIES` arrays of element
     blocks (their size from ``jax.eval_shape``, nothing evaluated) and
-    :data:`VECTOR_COPIES` vectors; 0 for a run with dense matrices."""
+    :data:`VECTOR_COPIES` vectors, and with friction the contact rows' arrays
+    (:data:`FRICTION_ROW_COPIES`); 0 for a run with dense matrices."""
     kinds = [k for k, p in zip(scheme.matrix_kinds(model), present_subproblems(model, scheme)) if p]
     if not assembles_nothing(kinds):
         return 0
@@ -149,7 +161,11 @@ def matrix_free_numbers(model: Model, scheme: AbstractScheme) -> int:
     import jax.numpy as jnp
 
     blocks = jax.eval_shape(model.element_mass, jax.ShapeDtypeStruct((model.n_dof,), jnp.float32)).blocks
-    return BLOCK_COPIES * blocks.size + VECTOR_COPIES * model.n_dof
+    numbers = BLOCK_COPIES * blocks.size + VECTOR_COPIES * model.n_dof
+    if model.n_friction:
+        m = model.n_constraints + model.n_friction * model.friction_dim
+        numbers += FRICTION_ROW_COPIES * m * model.n_dof + FRICTION_SYSTEM_COPIES * (2 * m) ** 2
+    return numbers
 
 
 def present_subproblems(model: Model, scheme: AbstractScheme) -> tuple[bool, bool, bool]:

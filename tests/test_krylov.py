@@ -129,8 +129,9 @@ def test_the_switch_follows_the_model_structure_and_size():
     assert dataclasses.replace(ds, krylov_min_dof=0, fast_paths=False).matrix_kinds(model)[0] is not KrylovFresh
     dsn = dataclasses.replace(nsga_jax.DSn(), krylov_min_dof=0)
     assert dsn.matrix_kinds(model) == (KrylovHeld, KrylovConstant, KrylovConstant)  # S_t^p = M without h² K
-    # friction, other scenes: never matrix-free (the bar is: test_bar_matches_its_tridiagonal_path)
-    assert not cube(3, mu=0.3).model.matrix_free
+    # friction too (tests/test_matrix_free_systems.py); other scenes never (the bar is:
+    # test_bar_matches_its_tridiagonal_path)
+    assert cube(3, mu=0.3).model.matrix_free
     for name in ("bouncing_ball", "rigid_box", "flexible_pendulum"):
         assert not load_scene(name).model.matrix_free, name
     assert dense_matrices(model, dataclasses.replace(ds, krylov_min_dof=0)) == 0

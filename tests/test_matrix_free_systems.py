@@ -1,9 +1,10 @@
 """The matrix-free path (nsga_jax/_system/matrix_free.py,
 nsga_jax/_integrators/krylov.py) on systems of several flexible bodies and
-with joints: the stacked element blocks and the rows (pins' and contacts')
+with joints and friction: the stacked element blocks and the rows (pins' and contacts')
 equal the assembled matrices and the constraint Jacobian, the switch follows
 the parts, and two cubes landing on a floor and a clamped beam whose tip
-falls onto a floor run as on the dense path, to the Newton tolerance, with
+falls onto a floor, and a cube landing while sliding with Coulomb friction,
+run as on the dense path, to the Newton tolerance, with
 the same contacts closing, the pins held, and the same gradients."""
 
 from __future__ import annotations
@@ -122,7 +123,8 @@ def test_a_pinned_node_in_a_contact_keeps_the_dense_path():
     assert not system.model().matrix_free
 
 
-@pytest.mark.parametrize("scheme", [nsga_jax.DS(), nsga_jax.DSn()], ids=["ds", "dsn"])
+@pytest.mark.parametrize("scheme", [nsga_jax.DS(), pytest.param(nsga_jax.DSn(), marks=pytest.mark.slow)],
+                         ids=["ds", "dsn"])
 def test_clamped_beam_matches_the_dense_path(scheme):
     """The tip falls onto the floor and stays (e = 0); the clamp holds to
     round-off on both paths, whose trajectories agree to the Newton tolerance."""
@@ -163,3 +165,86 @@ def test_gradient_through_the_clamped_beam_matches_the_dense_path():
     assert abs(grads[None]) * 1e4 > 1e-5  # E dz/dE [m]: far above the Newton tolerance
     np.testing.assert_allclose(grads[0], grads[None], rtol=1e-6)
     np.testing.assert_allclose(grads[0], fd, rtol=1e-4)
+
+
+def sliding_cube(mu=0.3, **overrides):
+    from nsga_jax.scenes import load_scene
+
+    return load_scene("flexible_cube", {"h": 3e-5, "t_end": 0.0009, "height": 0.0505, "velocity": -2.43,
+                                        "divisions": 2, "mu": mu, "vx": 0.5, **overrides})
+
+
+def test_cube_landing_with_friction_matches_the_dense_path():
+    """The cube lands while sliding (vx = 0.5 m/s, μ = 0.3): its nine
+    frictional contacts close, friction slows it, and both paths agree to the
+    Newton tolerance."""
+    scene = sliding_cube()
+    model, scheme = scene.model, scene.scheme()
+    assert model.matrix_free and model.n_friction == 9
+    nsga_jax.check_model(model)
+    kinds = dataclasses.replace(scheme, krylov_min_dof=0).matrix_kinds(model)
+    assert all(issubclass(kind, KRYLOV_KINDS) for kind in kinds)
+    args = (0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0)
+    krylov, dense = [nsga_jax.simulate(model, dataclasses.replace(scheme, krylov_min_dof=k), *args) for k in (0, None)]
+    assert krylov.failed_steps.size == 0 and dense.failed_steps.size == 0
+    scale = float(np.abs(dense.q).max())
+    np.testing.assert_allclose(krylov.q, dense.q, rtol=0, atol=10 * float(scheme.tol_r) * scale)
+    np.testing.assert_allclose(krylov.v, dense.v, rtol=0, atol=1e-6)
+    closed = np.asarray(dense.records.active_velocity)
+    np.testing.assert_array_equal(np.asarray(krylov.records.active_velocity), closed)
+    assert closed.any(axis=0).all()
+    vx = krylov.v[-1].reshape(-1, 3)[:, 0].mean()
+    assert vx < 0.45  # friction has slowed the slide (0.5 m/s at the landing)
+
+
+@pytest.mark.slow
+def test_gradient_through_the_sliding_landing_matches_the_dense_path():
+    """d/dμ of the cube's final mean horizontal velocity, both paths, against central differences."""
+    from nsga_jax.scenes import parametrize
+
+    base = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43, "divisions": 2, "mu": 0.3, "vx": 0.5}
+    params, build = parametrize("flexible_cube", base, ["mu"])
+    scheme = nsga_jax.DS(tol_r=1e-10, tol_f=1e-10)
+
+    def speed(p, k):
+        model, q0, v0, _ = build(p)
+        sol = nsga_jax.integrate(model, dataclasses.replace(scheme, krylov_min_dof=k), 0.0, 0.0006, 3e-5, q0, v0,
+                                 n_steps=20)
+        return jnp.mean(sol.v[-1].reshape(-1, 3)[:, 0])
+
+    grads = {k: float(jax.jit(jax.grad(lambda p: speed(p, k)))(params)["mu"]) for k in (0, None)}
+    step = 1e-4
+    fd = (float(speed({"mu": params["mu"] + step}, 0)) - float(speed({"mu": params["mu"] - step}, 0))) / (2 * step)
+    assert grads[None] < -1e-3  # more friction, slower
+    np.testing.assert_allclose(grads[0], grads[None], rtol=1e-6)
+    np.testing.assert_allclose(grads[0], fd, rtol=1e-4)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", ["dsn", "impact_instants", "warm_start", "energetic"])
+def test_sliding_landing_with_each_option_matches_the_dense_path(variant):
+    """Friction on the matrix-free path with DSn, impacts at their instants,
+    warm starts and the energetic impact law: the dense path's run each time."""
+    scene = sliding_cube()
+    base = scene.scheme()
+    scheme = {"dsn": dataclasses.replace(nsga_jax.DSn(), tol_r=base.tol_r),
+              "impact_instants": dataclasses.replace(base, impact_instants=True),
+              "warm_start": dataclasses.replace(base, warm_start=True),
+              "energetic": dataclasses.replace(base, impact_law="energetic")}[variant]
+    args = (0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0)
+    krylov, dense = [nsga_jax.simulate(scene.model, dataclasses.replace(scheme, krylov_min_dof=k), *args)
+                     for k in (0, None)]
+    assert krylov.failed_steps.size == 0 and dense.failed_steps.size == 0
+    np.testing.assert_allclose(krylov.q, dense.q, rtol=0, atol=10 * float(scheme.tol_r) * float(np.abs(dense.q).max()))
+    np.testing.assert_allclose(krylov.v, dense.v, rtol=0, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_a_batch_with_friction_equals_its_single_runs():
+    scene = sliding_cube(t_end=0.0006)
+    scheme = dataclasses.replace(scene.scheme(), krylov_min_dof=0)
+    batch = nsga_jax.simulate_batch(scene.model, scheme, 0.0, 0.0006, [3e-5, 4.5e-5], scene.q0, scene.v0)
+    for h, member in zip((3e-5, 4.5e-5), batch):
+        single = nsga_jax.simulate(scene.model, scheme, 0.0, 0.0006, h, scene.q0, scene.v0)
+        assert member.failed_steps.size == 0
+        np.testing.assert_allclose(member.q, single.q, rtol=0, atol=1e-12)

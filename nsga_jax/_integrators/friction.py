@@ -48,6 +48,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .._blocks import NodeRows
 from .._custom_types import Scalar, Vector
 from .._models.base import Model
 from .contact_law import NormalLaw, linearised_active
@@ -92,12 +93,20 @@ def projection_start(model: Model, q: Vector):
     return (jnp.zeros_like(q), jnp.zeros((multiplier_count(model),), q.dtype))
 
 
+def dense_rows(G: jax.Array | NodeRows) -> jax.Array:
+    """G as an (m, n) array: friction's Delassus matrix G A⁻¹ Gᵀ is formed
+    (module docstring), so a matrix-free model's node rows are spelled out
+    for it, O(m n) numbers, never n × n."""
+    return G.dense() if isinstance(G, NodeRows) else G
+
+
 def velocity_rows(model: Model, q: Vector, G: jax.Array) -> jax.Array:
     """The rows whose rates the velocity sub-problem constrains: g_q (nc, n) and,
-    with friction, g_T (nf · d, n) below them."""
+    with friction, g_T (nf · d, n) below them (G: an array or, read as one,
+    a matrix-free model's :class:`~nsga_jax._blocks.NodeRows`)."""
     if not has_friction(model):
         return G
-    return jnp.concatenate([G, model.tangent_jacobian(q)])
+    return jnp.concatenate([dense_rows(G), model.tangent_jacobian(q)])
 
 
 def disk_projection(sigma: jax.Array, radius: jax.Array) -> jax.Array:

@@ -169,8 +169,8 @@ class KrylovOperator(AbstractFactorisation):
         """``A^{-1} rhs`` for rhs (n,) (or (n, m): one solve per column)."""
         if isinstance(self.A, KroneckerMass):  # c_m M, inverted exactly
             return self.A.solve(rhs) if rhs.ndim == 1 else jax.vmap(self.A.solve, in_axes=1, out_axes=1)(rhs)
-        if rhs.ndim == 2:
-            return jax.vmap(lambda b: self.solve(b), in_axes=1, out_axes=1)(rhs)
+        if rhs.ndim == 2:  # over rows of rhsᵀ: batched on one axis, as jax's cg needs (b and its start alike)
+            return jax.vmap(lambda b: self.solve(b))(rhs.T).T
         return cg(self.A.mv, rhs, self.precondition, self.forcing(rhs, bound))
 
     def precondition(self, r: Vector) -> Vector:

@@ -47,6 +47,10 @@ class AbstractMass(eqx.Module):
     def norm(self, model: Model, q: Vector) -> Scalar:
         """Frobenius norm ||M(q)|| (for the round-off floor)."""
 
+    def diagonal(self, model: Model, q: Vector) -> Vector:
+        """The diagonal of M(q), shape (n,) (friction's tangential penalties)."""
+        return jnp.diagonal(self.matrix(model, q))
+
 
 class VaryingMass(AbstractMass):
     """M(q) evaluated at every state (``model.mass``, ``model.mass_product``)."""
@@ -105,6 +109,9 @@ class ElementMass(AbstractMass):
 
     def matrix(self, model: Model, q: Vector) -> Matrix:
         raise TypeError("a matrix-free model's mass is never assembled")
+
+    def diagonal(self, model: Model, q: Vector) -> Vector:
+        return self.M.diagonal()
 
     def product(self, model: Model, q: Vector, x: Vector) -> Vector:
         return self.M.mv(x) if self.kronecker is None else self.kronecker.mv(x)

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 from .._custom_types import Scalar, Vector
 from .coefficients import GenAlphaCoefficients
 from .contact_law import NormalLaw
-from .friction import FrictionLaw, has_friction, restarted, velocity_rows
+from .friction import FrictionLaw, dense_rows, has_friction, restarted, velocity_rows
 from .krylov import element_top_left
 from .model_terms import convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound
@@ -165,7 +165,7 @@ def position_problem(inputs: PositionInputs) -> Problem:
         below them g_T and the contact points' slip over the step Δ_T."""
         if GT is None:
             return G, g
-        return jnp.concatenate([G, GT]), jnp.concatenate([g, GT @ (q - q_prev)])
+        return jnp.concatenate([dense_rows(G), GT]), jnp.concatenate([g, GT @ (q - q_prev)])
 
     def build(law: NormalLaw | FrictionLaw) -> Problem:
         """The sub-problem with the contact law ``law`` (:func:`~nsga_jax._integrators.friction.restarted`)."""
@@ -241,7 +241,7 @@ def velocity_problem(inputs: VelocityInputs) -> Problem:
     if has_friction(model):  # the rows whose rates the law constrains: g_q and g_T
         G = velocity_rows(model, q, G)
         restituted = jnp.concatenate([restituted, jnp.zeros((G.shape[0] - restituted.shape[0],), q.dtype)])
-        law = FrictionLaw.of(model, candidates, unilateral, kv, pv, jnp.diagonal(ops.mass.matrix(model, q)),
+        law = FrictionLaw.of(model, candidates, unilateral, kv, pv, ops.mass.diagonal(model, q),
                              G[model.n_constraints:])._replace(stuck=inputs.stuck)
     f_const = None
     if with_forces:

@@ -73,7 +73,7 @@ class ElementBlocks(eqx.Module):
         (:meth:`constraint_rows`), so that a large model is solved without
         forming any n × n or (nc, n) array (:mod:`~nsga_jax._integrators.krylov`).
         Such a model has a constant mass, a force that does not depend on v,
-        affine constraints, no friction, and orthonormal rows: no two share a
+        affine constraints, and orthonormal rows: no two share a
         coordinate, except a node's rows along its coordinate axes (a pinned
         node's bilaterals, which come first)."""
         return False

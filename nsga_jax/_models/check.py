@@ -225,11 +225,10 @@ class Capability(NamedTuple):
 def _check_matrix_free(model: Model, states, masses, stiffness, jacobians, fail) -> None:
     """A matrix-free model's element blocks and node rows against its dense
     M, K and g_q, and the structure the iterative path relies on: a constant
-    mass, no damping, affine constraints, no friction, orthonormal rows."""
+    mass, no damping, affine constraints, orthonormal rows."""
     for flag, ok in (("constant_mass", model.constant_mass),
                      ("velocity_dependent_force", not model.velocity_dependent_force),
-                     ("linear_constraints", model.linear_constraints or model.n_constraints == 0),
-                     ("n_friction", model.n_friction == 0)):
+                     ("linear_constraints", model.linear_constraints or model.n_constraints == 0)):
         if not ok:
             fail("matrix_free", f"declared True, but {flag} rules it out")
     for (qs, _), M, K in zip(states, masses, stiffness):

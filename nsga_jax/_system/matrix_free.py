@@ -7,11 +7,13 @@ give element blocks and node coordinates (:class:`~nsga_jax.system.HexSolid` s,
 or :class:`~nsga_jax.system.Bar` s), with forces that do not depend on the
 state (gravity), joints that pin nodes to the ground
 (:class:`~nsga_jax.system.Pin` between ``ground`` and a node: a clamped face
-is one pin a node), and only frictionless
-:class:`~nsga_jax.system.PlaneContact` s on their nodes, no node in two
-contacts or pins: each contact row is then the plane's unit normal on one
-node's coordinates, a pin's rows ± the coordinate axes on its node's, and
-the rows are orthonormal. Several bodies are one matrix
+is one pin a node), and only :class:`~nsga_jax.system.PlaneContact` s on
+their nodes (with or without friction), no node in two contacts or pins:
+each contact row is then the plane's unit normal on one node's coordinates,
+a pin's rows ± the coordinate axes on its node's, and the rows are
+orthonormal. Friction's tangent rows (the plane's tangents on the same
+node) are spelled out as an array where the law needs them
+(:func:`~nsga_jax._integrators.friction.dense_rows`). Several bodies are one matrix
 whose element blocks are the bodies' blocks on their coordinates (block
 diagonal: nothing couples them but the contacts' rows). Derived from the
 parts, never declared.
@@ -95,7 +97,7 @@ def is_matrix_free(model) -> bool:
         return False
     if any(f.depends_on_state(layout.bodies_of(model, f)) for f in model.forces):
         return False
-    if any(not isinstance(c, PlaneContact) or c.nodes is None or c.frictional for c in model.contacts):
+    if any(not isinstance(c, PlaneContact) or c.nodes is None for c in model.contacts):
         return False
     dofs = [tuple(row) for group in _contact_dofs(model) for row in group]
     dofs += [tuple(node[0]) for node, _ in _pin_dofs(model)]
