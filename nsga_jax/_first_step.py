@@ -178,8 +178,8 @@ def check_first_step(model: Model, scheme: AbstractScheme, dtype: str = "float64
     if limit is None or est.seconds <= limit:
         return est
     source = "measured here" if est.measured else "assumed"
-    krylov = ("DS or DSn, which solve a matrix-free model this size without assembling (krylov_min_dof), or "
-              if getattr(model, "matrix_free", False) else "")
+    krylov = ("the matrix-free path, which every scheme takes for a matrix-free model this size unless "
+              "krylov_min_dof=None (it assembles nothing), or " if getattr(model, "matrix_free", False) else "")
     runs = f" ({members} members stepped together)" if members > 1 else ""
     fewer = "fewer members a batch (batch_size), " if members > 1 else ""
     raise ConfigError(

@@ -248,3 +248,60 @@ def test_a_batch_with_friction_equals_its_single_runs():
         single = nsga_jax.simulate(scene.model, scheme, 0.0, 0.0006, h, scene.q0, scene.v0)
         assert member.failed_steps.size == 0
         np.testing.assert_allclose(member.q, single.q, rtol=0, atol=1e-12)
+
+
+CASES = [("mj", "sliding"), ("cs", "landing")] + [
+    pytest.param(scheme, case, marks=pytest.mark.slow)
+    for scheme, case in [("mj", "landing"), ("mj", "clamped"), ("mj", "two_cubes"), ("cs", "clamped"),
+                         ("cs", "two_cubes")]]
+
+
+@pytest.mark.parametrize("scheme_name, case", CASES)
+def test_cs_and_mj_on_the_matrix_free_path_match_their_dense_paths(scheme_name, case):
+    """MJ's one iteration matrix M + (hθ)² K and CS's three diagonal blocks
+    as element blocks: the sliding cube with friction (MJ), the frictionless
+    landing, the clamped beam and two cubes run as each scheme's dense path
+    does, to its Newton tolerance. (CS fails the sliding cube's steps on both
+    paths alike: its coupled iteration, docs/combinations.md.)"""
+    if case in ("sliding", "landing"):
+        scene = sliding_cube(mu=0.3 if case == "sliding" else 0.0)
+        model, q0, v0, t_end, h = scene.model, scene.q0, scene.v0, scene.solver["t_end"], scene.solver["h"]
+    else:
+        model = clamped_beam() if case == "clamped" else two_cubes()
+        (q0, v0), t_end, h = model.initial_state(), (0.03 if case == "clamped" else 0.0015), (
+            2e-4 if case == "clamped" else 3e-5)
+    scheme = nsga_jax.MJ() if scheme_name == "mj" else nsga_jax.CS(tol_r=1e-8)
+    kinds = dataclasses.replace(scheme, krylov_min_dof=0).matrix_kinds(model)
+    assert all(issubclass(kind, KRYLOV_KINDS) for kind in kinds if kind.__name__ != "Refactored")  # present ones
+    assert any(issubclass(kind, KRYLOV_KINDS) for kind in kinds)
+    krylov, dense = [nsga_jax.simulate(model, dataclasses.replace(scheme, krylov_min_dof=k), 0.0, t_end, h, q0, v0)
+                     for k in (0, None)]
+    assert krylov.failed_steps.size == 0 and dense.failed_steps.size == 0
+    np.testing.assert_allclose(krylov.q, dense.q, rtol=0,
+                               atol=10 * float(scheme.tol_r) * float(np.abs(dense.q).max()))
+    np.testing.assert_allclose(krylov.v, dense.v, rtol=0, atol=1e-5)
+    closed = np.asarray(dense.records.active_velocity)
+    np.testing.assert_array_equal(np.asarray(krylov.records.active_velocity), closed)
+    assert closed.any()
+
+
+@pytest.mark.slow
+def test_moreau_jean_gradient_on_the_matrix_free_path_matches_its_dense_path():
+    """d/dμ and d/dE of the sliding cube's final velocities with MJ, both paths (CS has no adjoint)."""
+    from nsga_jax.scenes import parametrize
+
+    base = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43, "divisions": 2, "mu": 0.3, "vx": 0.5}
+    params, build = parametrize("flexible_cube", base, ["mu", "E"])
+    mj = nsga_jax.MJ(tol_r=1e-10, tol_f=1e-10)
+
+    def loss(p, k):
+        model, q0, v0, _ = build(p)
+        sol = nsga_jax.integrate(model, dataclasses.replace(mj, krylov_min_dof=k), 0.0, 0.0006, 3e-5, q0, v0,
+                                 n_steps=20)
+        v = sol.v[-1].reshape(-1, 3)
+        return jnp.mean(v[:, 2] ** 2) + jnp.mean(v[:, 0])
+
+    grads = {k: jax.jit(jax.grad(lambda p: loss(p, k)))(params) for k in (0, None)}
+    for name in params:
+        assert abs(float(grads[None][name])) > 1e-5, name
+        np.testing.assert_allclose(float(grads[0][name]), float(grads[None][name]), rtol=1e-8, err_msg=name)

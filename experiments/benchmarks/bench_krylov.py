@@ -1,7 +1,8 @@
 """Per-step time and peak memory of the flexible cube against its size, for
 the dense path (assembled iteration matrices, LU factors held between steps)
 and the matrix-free one (element blocks, conjugate gradients:
-``DS(krylov_min_dof=0)``).
+``DS(krylov_min_dof=0)``); ``--scheme mj`` measures Moreau–Jean's
+(``MJ(krylov_min_dof=0)``, the same tolerances) into ``krylov_mj.*``.
 
 Each (divisions, path) runs in its own process, so that ``os.wait4`` gives
 its peak resident memory; the paths alternate within each size. The cube
@@ -38,7 +39,10 @@ from nsga_jax._memory import estimate_run_bytes
 d, path, out = int(sys.argv[1]), sys.argv[2], sys.argv[3]
 scene = nsga_jax.load_scene("flexible_cube", {"divisions": d, "height": 0.0501, "velocity": -1.0,
                                               "h": 1e-4, "t_end": float(sys.argv[5]) * 1e-4})
-scheme = dataclasses.replace(scene.scheme(), krylov_min_dof=0 if path == "krylov" else None)
+base = scene.scheme()
+if sys.argv[6] == "mj":
+    base = nsga_jax.MJ(tol_r=base.tol_r, tol_f=base.tol_f, max_iter=base.max_iter)
+scheme = dataclasses.replace(base, krylov_min_dof=0 if path == "krylov" else None)
 est = estimate_run_bytes(scene.model, scheme, 8 if sys.argv[4] == "float64" else 4)
 sol = nsga_jax.simulate(scene.model, scheme, 0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0,
                         dtype=sys.argv[4])
@@ -55,9 +59,9 @@ FIELDS = ["divisions", "n_dof", "n_contacts", "path", "dtype", "steps", "failed"
           "us_per_step_per_dof", "newton_mean", "newton_max", "est_GB", "peak_GB", "dq_over_tol"]
 
 
-def run(divisions: int, path: str, dtype: str, steps: int, tmp: Path) -> dict:
+def run(divisions: int, path: str, dtype: str, steps: int, tmp: Path, scheme: str = "ds") -> dict:
     out = tmp / f"q_{divisions}_{path}_{dtype}.npy"
-    child = subprocess.Popen([sys.executable, "-c", CHILD, str(divisions), path, str(out), dtype, str(steps)],
+    child = subprocess.Popen([sys.executable, "-c", CHILD, str(divisions), path, str(out), dtype, str(steps), scheme],
                              stdout=subprocess.PIPE, text=True, env={**os.environ, "NSGA_JAX_SKIP_MEMORY_CHECK": "1"})
     _, status, usage = os.wait4(child.pid, 0)
     text = child.stdout.read() if child.stdout else ""
@@ -102,8 +106,11 @@ def plot(rows: list[dict], fits: dict, path: Path, title: str) -> None:
     bx.set_xlabel("coordinates n [-]")
     bx.set_ylabel("peak resident memory [GB]")
     bx.set_title("peak memory of the process")
+    from matplotlib.ticker import NullFormatter
+
     for a in (ax, bx):
         a.grid(True, which="both", alpha=0.3)
+        a.xaxis.set_minor_formatter(NullFormatter())  # the decades only: minor labels overlap
         a.legend()
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
@@ -114,7 +121,8 @@ def plot(rows: list[dict], fits: dict, path: Path, title: str) -> None:
 def title(dtype: str, steps, args) -> str:
     import platform
 
-    return (f"Flexible cube landing on a floor, DS, {dtype}, h = 1e-4 s, 20 steps a size\n"
+    scheme = "Moreau-Jean" if getattr(args, "scheme", "ds") == "mj" else "DS"
+    return (f"Flexible cube landing on a floor, {scheme}, {dtype}, h = 1e-4 s, 20 steps a size\n"
             f"dense LU against matrix-free CG; 2-core {platform.machine()} CPU (bench_krylov.py)")
 
 
@@ -128,13 +136,15 @@ def main() -> None:
     parser.add_argument("--fit-from", type=int, default=1000, help="smallest n in the fitted exponent")
     parser.add_argument("--out", default="docs/results/bench")
     parser.add_argument("--plot-only", action="store_true", help="redraw krylov.png from krylov.csv in --out")
+    parser.add_argument("--scheme", choices=("ds", "mj"), default="ds")
     args = parser.parse_args()
+    stem = "krylov" if args.scheme == "ds" else "krylov_mj"
     if args.plot_only:
-        with open(Path(args.out) / "krylov.csv") as f:
+        with open(Path(args.out) / f"{stem}.csv") as f:
             rows = [{**r, "n_dof": int(r["n_dof"]), "s_per_step": float(r["s_per_step"]),
                      "peak_GB": float(r["peak_GB"])} for r in csv.DictReader(f)]
         fits = {p: fit(rows, p, args.fit_from) for p in ("dense", "krylov")}
-        plot(rows, fits, Path(args.out) / "krylov.png", title(rows[0]["dtype"], len(rows), args))
+        plot(rows, fits, Path(args.out) / f"{stem}.png", title(rows[0]["dtype"], len(rows), args))
         return
     import numpy as np
 
@@ -150,7 +160,7 @@ def main() -> None:
             for path in args.paths.split(","):
                 if path == "dense" and d > args.dense_max:
                     continue
-                row = run(d, path, args.dtype, args.steps, Path(tmp))
+                row = run(d, path, args.dtype, args.steps, Path(tmp), args.scheme)
                 done[path] = row
                 rows.append(row)
                 print(f"d={d:3d} n={row['n_dof']:7,d} {path:6s} {row['s_per_step']:.4f} s/step "
@@ -162,13 +172,14 @@ def main() -> None:
                 for r in done.values():
                     r["dq_over_tol"] = float(np.abs(qa - qb).max() / scale)
     fits = {p: fit(rows, p, args.fit_from) for p in ("dense", "krylov")}
-    caption = (f"bench_krylov.py --divisions {args.divisions} --dtype {args.dtype} --steps {args.steps}; "
+    caption = (f"bench_krylov.py --scheme {args.scheme} --divisions {args.divisions} --dtype {args.dtype} "
+               f"--steps {args.steps}; "
                f"{machine()}")
-    with open(out / "krylov.csv", "w", newline="") as f:
+    with open(out / f"{stem}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    lines = [f"Flexible cube, h = 1e-4 s, {args.steps} steps through the landing; {caption}", "",
+    lines = [f"Flexible cube, {args.scheme.upper()}, h = 1e-4 s, {args.steps} steps through the landing; {caption}", "",
              "| divisions | n | contacts | path | s/step | µs/step/dof | compile [s] | Newton max (s, p, v) | "
              "peak [GB] | estimate [GB] | max Δq / (tol_r q_max) |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -179,8 +190,8 @@ def main() -> None:
                      f"{r['peak_GB']:.2f} | {r['est_GB']:.2f} | {dq} |")
     lines += ["", "Fitted exponent of time per step against n (n >= "
               f"{args.fit_from}): " + ", ".join(f"{p} {v:.2f}" for p, v in fits.items() if v is not None)]
-    (out / "krylov.md").write_text("\n".join(lines) + "\n")
-    plot(rows, fits, out / "krylov.png", title(args.dtype, args.steps, args))
+    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    plot(rows, fits, out / f"{stem}.png", title(args.dtype, args.steps, args))
     print("\n".join(lines))
 
 

@@ -51,6 +51,8 @@ class CS(AbstractGenAlpha):
         rho_inf: spectral radius at infinity ρ∞ ∈ [0, 1] (eq. 35).
         tol_r, tol_f: tolerances of eq. 51, applied to each of the three residuals.
         max_iter: cap on the global iterations (each is three linear solves). Static.
+        krylov_min_dof: as :attr:`~nsga_jax.DS.krylov_min_dof` (the three
+            diagonal blocks as element blocks, solved by conjugate gradients). Static.
     """
 
     name = "cs"
@@ -62,13 +64,16 @@ class CS(AbstractGenAlpha):
         return prepare_operators(
             model, t0, self.matrix_kinds(model),
             (lambda M, K, C: c_vd * M + C + c_q * K, lambda M, K, C: M, lambda M, K, C: M),
-            enabled=self.fast_paths,
+            enabled=self.fast_paths, tol_r=self.tol_r,
         )
 
     def matrix_kinds(self, model: Model) -> MatrixKinds:
         """Constant for a constant mass and a linear force (the smooth and
-        position matrices only with affine constraints), else refactored."""
-        return matrix_kinds(model, needs_constant_G=(True, True, False), enabled=self.fast_paths)
+        position matrices only with affine constraints), else refactored;
+        element blocks on the matrix-free path (:meth:`matrix_free`), where
+        only the smooth block holds the stiffness (the jumps carry no f terms)."""
+        return matrix_kinds(model, needs_constant_G=(True, True, False), enabled=self.fast_paths,
+                            krylov=self.matrix_free(model), holds_stiffness=(True, False, False))
 
     def step(self, model: Model, ops: Operators, state: StepState, h: Scalar) -> tuple[StepState, StepOutput]:
         if model.n_constraints == 0:  # no jumps: CS and DS coincide, the coupled iteration is the smooth one

@@ -45,7 +45,7 @@ from .impact_law import velocity_jump
 from .krylov import KRYLOV_MIN_DOF, KrylovOperator, kronecker_mass, linear_tolerance, mass_preconditioner
 from .model_terms import consistent_acceleration, force_at
 from .newton import solve
-from .operators import MatrixKinds, Operators, banded, matrix_kinds, prepare_operators
+from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators, uses_matrix_free
 from .records import (
     NewtonRecord,
     PositionAux,
@@ -69,6 +69,7 @@ class AbstractGenAlpha(AbstractScheme):
     """Shared by the nonsmooth generalized-α schemes: ρ∞, predictor, finalisation."""
 
     rho_inf: ScalarLike = eqx.field(default=0.8, converter=as_float, kw_only=True)
+    krylov_min_dof: int | None = eqx.field(static=True, default=KRYLOV_MIN_DOF, kw_only=True)
 
     @property
     def coefficients(self) -> GenAlphaCoefficients:
@@ -82,8 +83,32 @@ class AbstractGenAlpha(AbstractScheme):
         real = jnp.result_type(q0, float)  # the state's precision: q0's (float32 or float64)
         q0 = jnp.asarray(q0, real)
         v0 = jnp.asarray(v0, real)
-        vd0 = consistent_acceleration(model, t0, q0, v0)
+        if self.matrix_free(model):  # v̇̃_0 by conjugate gradients on M's element blocks
+            vd0 = self._matrix_free_acceleration(model, t0, q0, v0)
+        else:
+            vd0 = consistent_acceleration(model, t0, q0, v0)
         return StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
+
+    def matrix_free(self, model: Model) -> bool:
+        """Whether a run of ``model`` assembles no matrix (static): fast paths,
+        a matrix-free model and at least ``krylov_min_dof`` coordinates
+        (:func:`~nsga_jax._integrators.operators.uses_matrix_free`)."""
+        return uses_matrix_free(model, self.fast_paths, self.krylov_min_dof)
+
+    def _matrix_free_acceleration(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> Vector:
+        """v̇̃_0 = M⁻¹ f by conjugate gradients on M's element blocks; with pinned
+        nodes, M v̇ = f + G_Bᵀ λ, G_B v̇ = 0 by the projected solve (:mod:`~nsga_jax._integrators.krylov`)."""
+        real = q0.dtype
+        preconditioner = mass_preconditioner(kronecker_mass(model, real), 1.0)
+        M = model.element_mass(q0).node_blocks() if preconditioner is None else preconditioner.mass
+        zero = jnp.zeros((), real)
+        mass = KrylovOperator.of(M, zero, zero, linear_tolerance(self.tol_r, real), preconditioner)
+        nb = model.n_bilateral
+        if nb == 0:
+            return consistent_acceleration(model, t0, q0, v0, mass.solve)
+        GB = model.constraint_rows(q0).rows(0, nb)
+        return mass.bordered(-model.force(q0, v0, t0), jnp.zeros((nb,), real), GB, GB, jnp.ones((nb,), bool),
+                             jnp.ones((), real), zero)[0]
 
     def predict(self, state: StepState, h: Scalar) -> tuple[Vector, Vector, Vector]:
         """Algorithm 1, lines 5-9: the pseudo-acceleration a⁺ (v̇̃ = 0), ṽ and q̃."""
@@ -156,7 +181,6 @@ class DS(AbstractGenAlpha):
 
     nonsmooth_forces: bool = eqx.field(static=True, default=True, kw_only=True)
     reuse_min_dof: int = eqx.field(static=True, default=100, kw_only=True)
-    krylov_min_dof: int | None = eqx.field(static=True, default=KRYLOV_MIN_DOF, kw_only=True)
     impact_law: str = eqx.field(static=True, default="newton", kw_only=True)
     impact_instants: bool = eqx.field(static=True, default=False, kw_only=True)
     warm_start: bool = eqx.field(static=True, default=False, kw_only=True)
@@ -186,14 +210,6 @@ class DS(AbstractGenAlpha):
         ``persistent_contacts`` and a model with unilateral contacts."""
         return self.persistent_contacts and model.n_unilateral > 0
 
-    def matrix_free(self, model: Model) -> bool:
-        """Whether a run of ``model`` assembles no matrix (static): fast paths,
-        a matrix-free model and at least ``krylov_min_dof`` coordinates; a
-        banded one (a chain, already solved on its band in O(n),
-        :func:`~nsga_jax._integrators.operators.banded`) only with ``krylov_min_dof = 0``."""
-        return (self.fast_paths and self.krylov_min_dof is not None and model.matrix_free
-                and model.n_dof >= self.krylov_min_dof and (self.krylov_min_dof == 0 or not banded(model)))
-
     def reused(self, model: Model) -> tuple[bool, bool, bool]:
         """Which sub-problems (smooth, position, velocity) keep a factorisation
         between steps: those whose iteration matrix is :class:`~nsga_jax._integrators.iteration_matrix.Held`
@@ -207,23 +223,7 @@ class DS(AbstractGenAlpha):
         counts as zero (:func:`~nsga_jax._integrators.persistent_contacts.held_acceleration`):
         0 at a run's start, where v0 is exact; a restart after a jump passes
         its step, since the jump's slips are zero only to its tolerance."""
-        state = None
-        if self.matrix_free(model):  # v̇̃_0 by conjugate gradients on M's element blocks
-            real = jnp.result_type(q0, float)
-            q0, v0 = jnp.asarray(q0, real), jnp.asarray(v0, real)
-            preconditioner = mass_preconditioner(kronecker_mass(model, real), 1.0)
-            M = model.element_mass(q0).node_blocks() if preconditioner is None else preconditioner.mass
-            mass = KrylovOperator.of(M, jnp.zeros((), real), jnp.zeros((), real), linear_tolerance(self.tol_r, real),
-                                     preconditioner)
-            if model.n_bilateral:  # pinned nodes: M v̇ = f + G_Bᵀ λ, G_B v̇ = 0, by the projected solve
-                GB = model.constraint_rows(q0).rows(0, model.n_bilateral)
-                vd0 = mass.bordered(-model.force(q0, v0, t0), jnp.zeros((model.n_bilateral,), real), GB, GB,
-                                    jnp.ones((model.n_bilateral,), bool), jnp.ones((), real), jnp.zeros((), real))[0]
-            else:
-                vd0 = consistent_acceleration(model, t0, q0, v0, mass.solve)
-            state = StepState(t=jnp.asarray(t0, real), q=q0, v=v0, vd=vd0, a=vd0)
-        if state is None:
-            state = super().init(model, t0, q0, v0)
+        state = super().init(model, t0, q0, v0)
         if self.warm_start and model.n_constraints:  # the first step starts at zero, as without the option
             zero = projection_start(model, state.q)[1]
             state = dataclasses.replace(state, multipliers=(zero, zero))

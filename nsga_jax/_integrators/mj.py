@@ -31,9 +31,10 @@ from .base import (
 )
 from .contact_law import NormalLaw
 from .friction import FrictionLaw, has_friction, projection_start, restarted, velocity_rows
+from .krylov import KRYLOV_KINDS, KRYLOV_MIN_DOF, element_top_left
 from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve
-from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
+from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators, uses_matrix_free
 from .records import NewtonRecord, StepOutput, SubproblemRecord, VelocityAux, make_output, subproblem_result
 from .residuals import Scaling, constraint_floor, roundoff_floor
 from .subproblem_inputs import MoreauJeanInputs
@@ -45,9 +46,14 @@ class MJ(AbstractScheme):
     Attributes:
         theta: θ ∈ [0, 1] of the θ-method (0.5 by default).
         tol_r, tol_f, max_iter: as for every scheme (eq. 51 and the Newton cap).
+        krylov_min_dof: as :attr:`~nsga_jax.DS.krylov_min_dof`: a
+            matrix-free model of at least this many coordinates assembles no
+            matrix; its one iteration matrix M + (hθ)² K is element blocks
+            solved by conjugate gradients. ``None``: never. Static.
     """
 
     theta: ScalarLike = eqx.field(default=0.5, converter=as_float, kw_only=True)
+    krylov_min_dof: int | None = eqx.field(static=True, default=KRYLOV_MIN_DOF, kw_only=True)
 
     name = "mj"
     subproblems = ("moreau_jean",)
@@ -60,13 +66,20 @@ class MJ(AbstractScheme):
         return prepare_operators(
             model, t0, self.matrix_kinds(model),
             (None, None, lambda M, K, C: M + h * th * C + (h * th) ** 2 * K), enabled=self.fast_paths,
+            tol_r=self.tol_r,
         )
 
     def matrix_kinds(self, model: Model) -> MatrixKinds:
         """One velocity-level matrix: constant for a constant mass, a linear
-        force and affine constraints (it holds their curvature), else refactored."""
+        force and affine constraints (it holds their curvature), else refactored;
+        element blocks on the matrix-free path (:meth:`matrix_free`)."""
         return matrix_kinds(model, needs_constant_G=(False, False, True), present=(False, False, True),
-                            enabled=self.fast_paths)
+                            enabled=self.fast_paths, krylov=self.matrix_free(model),
+                            holds_stiffness=(False, False, True))
+
+    def matrix_free(self, model: Model) -> bool:
+        """Whether a run of ``model`` assembles no matrix (static; as :meth:`~nsga_jax.DS.matrix_free`)."""
+        return uses_matrix_free(model, self.fast_paths, self.krylov_min_dof)
 
     def init(self, model: Model, t0: Scalar, q0: Vector, v0: Vector) -> StepState:
         real = jnp.result_type(q0, float)  # the state's precision: q0's (float32 or float64)
@@ -119,8 +132,9 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
     friction = has_friction(model)
     law: NormalLaw | FrictionLaw = NormalLaw(candidates, unilateral, kv, pv)
     if friction:  # tangential penalties from the start of the step
-        law = FrictionLaw.of(model, candidates, unilateral, kv, pv, jnp.diagonal(ops.mass.matrix(model, q_n)),
+        law = FrictionLaw.of(model, candidates, unilateral, kv, pv, ops.mass.diagonal(model, q_n),
                              model.tangent_jacobian(q_n))
+    krylov = isinstance(ops.velocity, KRYLOV_KINDS)  # element blocks: constant M, no damping, affine rows
 
     def build(law: NormalLaw | FrictionLaw) -> Problem:
         """The step with the contact law ``law`` (:func:`~nsga_jax._integrators.friction.restarted`)."""
@@ -152,6 +166,9 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
         def update(x, res):
             v, Lam = x
             q = position(v)
+            if krylov:  # M + (hθ)² K element by element
+                A = ops.velocity.factored(None, lambda: element_top_left(model, ops, q, 1.0, (h * theta) ** 2))
+                return correction(x, res, q, A, roundoff_floor(h, A.K_norm, A.C_norm, q, v))
             K, C, K_norm, C_norm = ops.force.tangents(model, q, v, t)
             floor = roundoff_floor(h, K_norm, C_norm, q, v)
 
@@ -165,11 +182,17 @@ def moreau_jean_problem(inputs: MoreauJeanInputs) -> Problem:
                     A = A - h * theta * jax.jacfwd(lambda y: model.tangent_jacobian(y).T @ res.aux.friction)(q)
                 return A, K_norm, C_norm
 
-            A = ops.velocity.factored(matrix)
+            return correction(x, res, q, ops.velocity.factored(matrix), floor)
+
+        def correction(x, res, q, A, floor):
+            v, Lam = x
             if nc == 0:
                 return (-A.solve(res.r), Lam), floor
             G, e_term = rows(q)
             floor = floor + constraint_floor(kv, G, v)
+            if krylov:  # affine rows and constant tangents: no convective terms
+                dv, dLam = law.correction(A, res.r[:n], res.r[n:], G, G, Lam, G @ v + e_term, None)
+                return (dv, dLam), floor
             G_low = G[:nc] + h * theta * convective(model, q, v)
             if friction:  # the tangential rows, with their convective part d(g_T v)/dq
                 G_T = G[nc:] if model.linear_constraints else G[nc:] + h * theta * jax.jacfwd(

@@ -94,6 +94,15 @@ def banded(model: Model) -> bool:
             and 8 * (2 * b + 1) <= model.n_dof)
 
 
+def uses_matrix_free(model: Model, fast_paths: bool, krylov_min_dof: int | None) -> bool:
+    """Whether a run of ``model`` assembles no matrix (static): fast paths,
+    a matrix-free model and at least ``krylov_min_dof`` coordinates; a
+    banded one (a chain, already solved on its band in O(n), :func:`banded`)
+    only with ``krylov_min_dof = 0``."""
+    return (fast_paths and krylov_min_dof is not None and model.matrix_free
+            and model.n_dof >= krylov_min_dof and (krylov_min_dof == 0 or not banded(model)))
+
+
 def matrix_kinds(model: Model, needs_constant_G: tuple[bool, bool, bool],
                  present: tuple[bool, bool, bool] = (True, True, True), enabled: bool = True,
                  hold: bool = False, krylov: bool = False,
