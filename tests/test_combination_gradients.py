@@ -127,9 +127,10 @@ def cube_loss(scheme, steps=8):
     return params, loss
 
 
-# MJ has no matrix-free path: its cube is checked dense
 @pytest.mark.parametrize("scheme", [nj.DSn(krylov_min_dof=0, tol_r=1e-10, tol_f=1e-10),
-                                    nj.MJ(tol_r=1e-10, tol_f=1e-10)], ids=["DSn-matrix-free", "MJ-dense"])
+                                    nj.MJ(krylov_min_dof=None, tol_r=1e-10, tol_f=1e-10),
+                                    nj.MJ(krylov_min_dof=0, tol_r=1e-10, tol_f=1e-10)],
+                         ids=["DSn-matrix-free", "MJ-dense", "MJ-matrix-free"])
 def test_cube_discrete_adjoint_against_fd(scheme):
     params, loss = cube_loss(scheme)
     check_against_fd(params, loss)
