@@ -1,8 +1,8 @@
 """Per-step time and peak memory of the flexible cube against its size, for
 the dense path (assembled iteration matrices, LU factors held between steps)
 and the matrix-free one (element blocks, conjugate gradients:
-``DS(krylov_min_dof=0)``); ``--scheme mj`` measures Moreau–Jean's
-(``MJ(krylov_min_dof=0)``, the same tolerances) into ``krylov_mj.*``.
+``DS(krylov_min_dof=0)``); ``--scheme mj`` (``cs``) measures Moreau–Jean's
+(CS's) paths with the same tolerances into ``krylov_mj.*`` (``krylov_cs.*``).
 
 Each (divisions, path) runs in its own process, so that ``os.wait4`` gives
 its peak resident memory; the paths alternate within each size. The cube
@@ -40,8 +40,8 @@ d, path, out = int(sys.argv[1]), sys.argv[2], sys.argv[3]
 scene = nsga_jax.load_scene("flexible_cube", {"divisions": d, "height": 0.0501, "velocity": -1.0,
                                               "h": 1e-4, "t_end": float(sys.argv[5]) * 1e-4})
 base = scene.scheme()
-if sys.argv[6] == "mj":
-    base = nsga_jax.MJ(tol_r=base.tol_r, tol_f=base.tol_f, max_iter=base.max_iter)
+if sys.argv[6] in ("mj", "cs"):
+    base = getattr(nsga_jax, sys.argv[6].upper())(tol_r=base.tol_r, tol_f=base.tol_f, max_iter=base.max_iter)
 scheme = dataclasses.replace(base, krylov_min_dof=0 if path == "krylov" else None)
 est = estimate_run_bytes(scene.model, scheme, 8 if sys.argv[4] == "float64" else 4)
 sol = nsga_jax.simulate(scene.model, scheme, 0.0, scene.solver["t_end"], scene.solver["h"], scene.q0, scene.v0,
@@ -121,7 +121,7 @@ def plot(rows: list[dict], fits: dict, path: Path, title: str) -> None:
 def title(dtype: str, steps, args) -> str:
     import platform
 
-    scheme = "Moreau-Jean" if getattr(args, "scheme", "ds") == "mj" else "DS"
+    scheme = {"mj": "Moreau-Jean", "cs": "CS"}.get(getattr(args, "scheme", "ds"), "DS")
     return (f"Flexible cube landing on a floor, {scheme}, {dtype}, h = 1e-4 s, 20 steps a size\n"
             f"dense LU against matrix-free CG; 2-core {platform.machine()} CPU (bench_krylov.py)")
 
@@ -136,9 +136,9 @@ def main() -> None:
     parser.add_argument("--fit-from", type=int, default=1000, help="smallest n in the fitted exponent")
     parser.add_argument("--out", default="docs/results/bench")
     parser.add_argument("--plot-only", action="store_true", help="redraw krylov.png from krylov.csv in --out")
-    parser.add_argument("--scheme", choices=("ds", "mj"), default="ds")
+    parser.add_argument("--scheme", choices=("ds", "mj", "cs"), default="ds")
     args = parser.parse_args()
-    stem = "krylov" if args.scheme == "ds" else "krylov_mj"
+    stem = "krylov" if args.scheme == "ds" else f"krylov_{args.scheme}"
     if args.plot_only:
         with open(Path(args.out) / f"{stem}.csv") as f:
             rows = [{**r, "n_dof": int(r["n_dof"]), "s_per_step": float(r["s_per_step"]),

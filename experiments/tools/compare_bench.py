@@ -36,7 +36,10 @@ RUN = r"""
 import sys
 sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f)]  # import the given tree
 sys.path.insert(0, sys.argv[1])
-from nsga_jax._cli import main
+try:  # the command line's module, private since e60fe98
+    from nsga_jax._cli import main
+except ModuleNotFoundError:
+    from nsga_jax.cli import main
 sys.exit(main(["bench", *sys.argv[2:]]))
 """
 

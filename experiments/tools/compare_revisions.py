@@ -37,23 +37,30 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
-# The child imports the private helpers bench._bench_scene and _simulate._n_steps on purpose:
-# they exist under these names in every revision this script compares.
+# The child imports the private helpers _bench_scene, BatchRun, broadcast_members and step_count on purpose:
+# they exist under these names in every revision this script compares, in modules that became private
+# (_bench, _batch, _validation) in e60fe98: a revision before it has them public.
 MEASURE = r"""
 import json, os, sys, time
 sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f)]  # import the given tree
 sys.path.insert(0, sys.argv[1])
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ["JAX_ENABLE_X64"] = "1"  # float64 (a revision that turns it on at import does too)
+import importlib
 import numpy as np
-from nsga_jax._bench import _bench_scene
+def module(name):  # private since e60fe98, public before
+    try:
+        return importlib.import_module(f"nsga_jax._{name}")
+    except ModuleNotFoundError:
+        return importlib.import_module(f"nsga_jax.{name}")
+_bench_scene = module("bench")._bench_scene
 scene = _bench_scene(sys.argv[2], {"scheme": "ds"}, 2000)
 runs = [scene.run(dtype="float64", throw=False) for _ in range(4)]
 row = {"us_per_step": min(1e6 * r.wall_time / r.n_steps for r in runs), "compile_s": runs[0].compile_time}
 batch = int(sys.argv[3])
 if batch > 1:
-    from nsga_jax._batch import BatchRun, broadcast_members
-    from nsga_jax._validation import step_count as _n_steps
+    BatchRun, broadcast_members = module("batch").BatchRun, module("batch").broadcast_members
+    _n_steps = module("validation").step_count
     n = _n_steps(0.0, scene.solver["t_end"], scene.solver["h"])
     cpu = time.process_time()
     run = BatchRun(broadcast_members(scene.model, batch), scene.scheme(), 0.0, np.tile(scene.q0, (batch, 1)),
