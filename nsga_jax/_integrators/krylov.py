@@ -57,8 +57,8 @@ KAPPA = 0.1
 """A linear solve's residual relative to eq. 51's bound (see the module docstring)."""
 
 KRYLOV_MIN_DOF: int | None = 500
-"""The size from which DS solves a matrix-free model without assembling
-(:attr:`~nsga_jax._integrators.ds.DS.krylov_min_dof`), between the sizes
+"""The size from which a scheme (DS, DSn, CS, MJ) solves a matrix-free model
+without assembling (:attr:`~nsga_jax.DS.krylov_min_dof`), between the sizes
 where the dense and matrix-free paths measured even and where the
 matrix-free one is faster, on the flexible cube landing
 (``experiments/benchmarks/bench_krylov.py``; the table and the switch
