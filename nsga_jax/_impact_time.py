@@ -50,7 +50,7 @@ from jax import lax
 from ._custom_types import Scalar, Vector
 from ._impact_time_friction import continuation, frictional_impact
 from ._integrators.base import StepState
-from ._integrators.friction import has_friction
+from ._integrators.contact_rows import has_friction
 from ._integrators.linalg import dense_solve, masked_solve
 from ._integrators.model_terms import consistent_acceleration, is_unilateral, restitution
 from ._integrators.operators import Operators

@@ -37,7 +37,8 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._custom_types import Vector
-from ._integrators.friction import FrictionLaw, velocity_rows
+from ._integrators.contact_rows import velocity_rows
+from ._integrators.friction import FrictionLaw
 from ._integrators.linalg import Factorisation, dense_solve, masked_solve
 from ._integrators.newton import damped_step
 from ._models.base import Model

@@ -134,7 +134,7 @@ FRICTION_ROW_COPIES = 8
 """With Coulomb friction, arrays of m × n numbers (m = nc + nf · d contact
 rows) the matrix-free path holds: the rows spelled out, A⁻¹ Gᵀ and the
 work vectors of its m conjugate-gradient solves, batched
-(:func:`~nsga_jax._integrators.friction.dense_rows`); and
+(:func:`~nsga_jax._integrators.contact_rows.dense_rows`); and
 :data:`FRICTION_SYSTEM_COPIES` arrays of (2m)² numbers, the contact law's
 Newton system and its SVD. Both counted from the arrays a step forms, not
 fitted on measured peaks as :data:`BLOCK_COPIES` is."""

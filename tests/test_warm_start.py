@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax._integrators.friction import multiplier_count
+from nsga_jax._integrators.contact_rows import multiplier_count
 from nsga_jax.scenes import load_scene
 
 H = 1e-3

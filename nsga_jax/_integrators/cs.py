@@ -25,8 +25,8 @@ from .._results import RESULTS, from_code
 from .base import (
     StepState,
 )
+from .contact_rows import projection_start
 from .ds import DS, AbstractGenAlpha
-from .friction import projection_start
 from .operators import MatrixKinds, Operators, matrix_kinds, prepare_operators
 from .records import NewtonRecord, PositionAux, StepOutput, SubproblemRecord, VelocityAux, make_output
 from .residuals import DIVERGENCE_FACTOR

@@ -39,7 +39,7 @@ from .base import (
     StepState,
 )
 from .coefficients import GenAlphaCoefficients
-from .friction import projection_start
+from .contact_rows import projection_start
 from .impact_instants import open_floor, split_step
 from .impact_law import velocity_jump
 from .krylov import KRYLOV_MIN_DOF, KrylovOperator, kronecker_mass, linear_tolerance, mass_preconditioner
@@ -365,7 +365,7 @@ class DS(AbstractGenAlpha):
 def newton_start(model: Model, q: Vector, state: StepState, which: int) -> tuple[Vector, jax.Array]:
     """Newton's start of the position correction (``which`` 0) or the velocity
     jump (1): zero corrections, and zero multipliers
-    (:func:`~nsga_jax._integrators.friction.projection_start`, the paper's) or,
+    (:func:`~nsga_jax._integrators.contact_rows.projection_start`, the paper's) or,
     with ``DS(warm_start=True)``, the multipliers the last step converged to."""
     if state.multipliers is None:
         return projection_start(model, q)

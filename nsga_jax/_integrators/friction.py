@@ -48,7 +48,6 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .._blocks import NodeRows
 from .._custom_types import Scalar, Vector
 from .._models.base import Model
 from .contact_law import NormalLaw, linearised_active
@@ -73,40 +72,6 @@ with the restarts none fails (docs/friction.md)."""
 SLIP_MARGIN = 1e-3
 """How far past the edge of its disk :meth:`FrictionLaw.first_slip` moves the
 first contact to slide, relative to the step that reaches the edge."""
-
-
-def has_friction(model: Model) -> bool:
-    """Whether the model has frictional contacts (static)."""
-    return model.n_friction > 0
-
-
-def multiplier_count(model: Model) -> int:
-    """Unknown multipliers of a velocity-level sub-problem: nc normal ones and,
-    with friction, nf · d tangential ones."""
-    return model.n_constraints + model.n_friction * model.friction_dim
-
-
-def projection_start(model: Model, q: Vector):
-    """Newton's starting point of the position correction and of a
-    velocity-level sub-problem: U = 0, ν = 0 (or W = 0, Λ = 0), the
-    multipliers with their tangential part where the model has friction."""
-    return (jnp.zeros_like(q), jnp.zeros((multiplier_count(model),), q.dtype))
-
-
-def dense_rows(G: jax.Array | NodeRows) -> jax.Array:
-    """G as an (m, n) array: friction's Delassus matrix G A⁻¹ Gᵀ is formed
-    (module docstring), so a matrix-free model's node rows are spelled out
-    for it, O(m n) numbers, never n × n."""
-    return G.dense() if isinstance(G, NodeRows) else G
-
-
-def velocity_rows(model: Model, q: Vector, G: jax.Array) -> jax.Array:
-    """The rows whose rates the velocity sub-problem constrains: g_q (nc, n) and,
-    with friction, g_T (nf · d, n) below them (G: an array or, read as one,
-    a matrix-free model's :class:`~nsga_jax._blocks.NodeRows`)."""
-    if not has_friction(model):
-        return G
-    return jnp.concatenate([dense_rows(G), model.tangent_jacobian(q)])
 
 
 def disk_projection(sigma: jax.Array, radius: jax.Array) -> jax.Array:

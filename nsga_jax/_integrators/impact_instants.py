@@ -64,7 +64,7 @@ from .._custom_types import Scalar, Vector
 from .._models.base import Model
 from .._results import RESULTS, code_of
 from .base import StepState
-from .friction import projection_start
+from .contact_rows import projection_start
 from .impact_law import velocity_jump
 from .linalg import saddle_acceleration
 from .operators import Operators

@@ -52,7 +52,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Scalar, Vector
 from .._models.base import Model
-from .friction import has_friction, velocity_rows
+from .contact_rows import has_friction, velocity_rows
 from .model_terms import restitution
 from .newton import NewtonResult, solve
 from .records import VelocityAux

@@ -30,7 +30,8 @@ from .base import (
     StepState,
 )
 from .contact_law import NormalLaw
-from .friction import FrictionLaw, has_friction, projection_start, restarted, velocity_rows
+from .contact_rows import has_friction, projection_start, velocity_rows
+from .friction import FrictionLaw, restarted
 from .krylov import KRYLOV_KINDS, KRYLOV_MIN_DOF, element_top_left
 from .model_terms import convective, curvature, is_unilateral, restitution
 from .newton import Problem, Residual, convergence_bound, solve

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Matrix, Scalar, ScalarLike
 from .._models.base import Model
-from .friction import velocity_rows
+from .contact_rows import velocity_rows
 from .iteration_matrix import (
     AbstractIterationMatrix,
     ConstantInverse,

@@ -53,7 +53,8 @@ from .._custom_types import Scalar, ScalarLike, Vector
 from .._models.base import Model
 from .base import StepState
 from .contact_law import NormalLaw
-from .friction import FrictionLaw, has_friction, restarted, velocity_rows
+from .contact_rows import has_friction, velocity_rows
+from .friction import FrictionLaw, restarted
 from .impact_instants import contact_rows, sticking_acceleration
 from .linalg import saddle_acceleration
 from .model_terms import convective, curvature, is_unilateral

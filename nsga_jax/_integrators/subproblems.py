@@ -34,7 +34,8 @@ import jax.numpy as jnp
 from .._custom_types import Scalar, Vector
 from .coefficients import GenAlphaCoefficients
 from .contact_law import NormalLaw
-from .friction import FrictionLaw, dense_rows, has_friction, restarted, velocity_rows
+from .contact_rows import dense_rows, has_friction, velocity_rows
+from .friction import FrictionLaw, restarted
 from .krylov import element_top_left
 from .model_terms import convective, curvature, is_unilateral, pad_bilateral, restitution
 from .newton import Problem, Residual, convergence_bound

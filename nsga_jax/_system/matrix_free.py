@@ -13,7 +13,7 @@ each contact row is then the plane's unit normal on one node's coordinates,
 a pin's rows ± the coordinate axes on its node's, and the rows are
 orthonormal. Friction's tangent rows (the plane's tangents on the same
 node) are spelled out as an array where the law needs them
-(:func:`~nsga_jax._integrators.friction.dense_rows`). Several bodies are one matrix
+(:func:`~nsga_jax._integrators.contact_rows.dense_rows`). Several bodies are one matrix
 whose element blocks are the bodies' blocks on their coordinates (block
 diagonal: nothing couples them but the contacts' rows). Derived from the
 parts, never declared.
