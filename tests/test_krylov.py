@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import assert_blocks_equal_assembled
 
 import nsga_jax
 from nsga_jax._blocks import NodeRows
@@ -38,17 +39,7 @@ def perturbed(scene, scale=1e-3, seed=0):
 
 def test_element_and_node_blocks_equal_the_assembled_matrices():
     scene = cube(2)
-    model, q = scene.model, perturbed(scene)
-    M = model.mass(q)
-    K, _ = model.tangents(q, jnp.zeros_like(q), 0.0)
-    x = jnp.asarray(np.random.default_rng(1).standard_normal(model.n_dof))
-    for blocks, dense in ((model.element_mass(q), M), (model.element_stiffness(q), K)):
-        scale = float(jnp.abs(dense).max())
-        for form in (blocks, blocks.node_blocks()):
-            np.testing.assert_allclose(form.dense(), dense, rtol=0, atol=1e-13 * scale)
-            np.testing.assert_allclose(form.mv(x), dense @ x, rtol=0, atol=1e-12 * scale)
-            np.testing.assert_allclose(form.diagonal(), jnp.diagonal(dense), rtol=0, atol=1e-13 * scale)
-        np.testing.assert_allclose(blocks.node_blocks().frobenius_norm(), jnp.linalg.norm(dense), rtol=1e-13)
+    assert_blocks_equal_assembled(scene.model, perturbed(scene))
 
 
 def test_kronecker_mass_is_exact_and_preconditions_the_velocity_jump():

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import assert_blocks_equal_assembled
 
 import nsga_jax
 from nsga_jax._integrators.krylov import KRYLOV_KINDS
@@ -44,14 +45,7 @@ def test_stacked_blocks_and_rows_equal_the_assembled_matrices():
     assert model.matrix_free
     q0, _ = model.initial_state()
     q = q0 + 1e-3 * jnp.asarray(np.random.default_rng(0).standard_normal(model.n_dof))
-    M = model.mass(q)
-    K, _ = model.tangents(q, jnp.zeros_like(q), 0.0)
-    x = jnp.asarray(np.random.default_rng(1).standard_normal(model.n_dof))
-    for blocks, dense in ((model.element_mass(q), M), (model.element_stiffness(q), K)):
-        scale = float(jnp.abs(dense).max())
-        for form in (blocks, blocks.node_blocks()):
-            np.testing.assert_allclose(form.dense(), dense, rtol=0, atol=1e-13 * scale)
-            np.testing.assert_allclose(form.mv(x), dense @ x, rtol=0, atol=1e-12 * scale)
+    assert_blocks_equal_assembled(model, q)
     rows = model.constraint_rows(q)
     assert rows.orthonormal() and rows.shape == (18, model.n_dof)
     np.testing.assert_allclose(rows.dense(), model.constraint_jacobian(q), rtol=0, atol=1e-15)
