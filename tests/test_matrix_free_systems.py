@@ -299,3 +299,27 @@ def test_moreau_jean_gradient_on_the_matrix_free_path_matches_its_dense_path():
     for name in params:
         assert abs(float(grads[None][name])) > 1e-5, name
         np.testing.assert_allclose(float(grads[0][name]), float(grads[None][name]), rtol=1e-8, err_msg=name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scheme", [nsga_jax.DS(tol_r=1e-10, tol_f=1e-10), nsga_jax.MJ(tol_r=1e-10, tol_f=1e-10)],
+                         ids=["ds", "mj"])
+def test_event_gradient_of_the_frictionless_landing_matches_the_dense_path(scheme):
+    """ImpactTimeAdjoint on the matrix-free path: d/dE of the landing cube's
+    final velocities equals the dense path's (frictionless: with friction the
+    event gradient is not finite on either path, docs/combinations.md)."""
+    from nsga_jax.scenes import parametrize
+
+    base = {"h": 3e-5, "t_end": 0.0006, "height": 0.0505, "velocity": -2.43, "divisions": 2, "vx": 0.5}
+    params, build = parametrize("flexible_cube", base, ["E"])
+
+    def loss(p, k):
+        model, q0, v0, _ = build(p)
+        sol = nsga_jax.integrate(model, dataclasses.replace(scheme, krylov_min_dof=k), 0.0, 0.0006, 3e-5, q0, v0,
+                                 n_steps=20, adjoint=nsga_jax.ImpactTimeAdjoint())
+        v = sol.v[-1].reshape(-1, 3)
+        return jnp.mean(v[:, 2] ** 2) + jnp.mean(v[:, 0])
+
+    grads = {k: float(jax.jit(jax.grad(lambda p: loss(p, k)))(params)["E"]) for k in (0, None)}
+    assert np.isfinite(grads[None]) and abs(grads[None]) > 1e-5
+    np.testing.assert_allclose(grads[0], grads[None], rtol=1e-8)
