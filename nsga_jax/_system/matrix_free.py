@@ -47,7 +47,9 @@ def _flexible(model, name: str) -> Any:
 
 
 def _body_coordinates(model, q: Vector) -> list[Vector]:
-    """Each body's slice of q."""
+    """Each body's slice of q (one body: q itself, no slice in the program)."""
+    if len(model.bodies) == 1:
+        return [q]
     slices = layout.body_slices(model)
     return [q[slices[name]] for name in model.body_names]
 
