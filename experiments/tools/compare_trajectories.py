@@ -1,6 +1,7 @@
 """Whether two git revisions compute the same trajectories, bit for bit.
 
     python experiments/tools/compare_trajectories.py BASE [HEAD] [--scenes a,b] [--schemes ds,dsn,cs,mj]
+        [--set impacts=instants ...]
 
 Each revision is checked out into a temporary worktree (HEAD defaults to the
 working tree) and runs every (scene, scheme) for a short window in its own
@@ -13,6 +14,7 @@ array bitwise equal; a change of method says by how much it moved.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -25,17 +27,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from compare_revisions import revision_trees  # noqa: E402  (the script next to this one)
 
 RUN = r"""
-import os, sys
+import json, os, sys
 sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f)]  # import the given tree
 sys.path.insert(0, sys.argv[1])
 os.environ["JAX_ENABLE_X64"] = "1"
 import numpy as np
 import nsga_jax
-out = sys.argv[2]
-for spec in sys.argv[3:]:
+out, settings = sys.argv[2], json.loads(sys.argv[3])
+for spec in sys.argv[4:]:
     scene_name, scheme, t_end = spec.split(":")
     try:
-        scene = nsga_jax.load_scene(scene_name, {"scheme": scheme, "t_end": float(t_end)})
+        scene = nsga_jax.load_scene(scene_name, {"scheme": scheme, "t_end": float(t_end), **settings})
         sol = scene.run(throw=False)
         np.savez(f"{out}/{scene_name}-{scheme}.npz", q=np.asarray(sol.q), v=np.asarray(sol.v),
                  impulse=np.asarray(sol.impulse))
@@ -56,13 +58,23 @@ def main() -> None:
     parser.add_argument("head", nargs="?", default=None)
     parser.add_argument("--scenes", default=",".join(WINDOWS))
     parser.add_argument("--schemes", default="ds,dsn,cs,mj")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a setting of every run (a solver setting or parameter; VALUE read as JSON, else text)")
     args = parser.parse_args()
+    settings = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        try:
+            settings[key] = json.loads(value)
+        except json.JSONDecodeError:
+            settings[key] = value
     specs = [f"{s}:{k}:{WINDOWS[s]}" for s in args.scenes.split(",") for k in args.schemes.split(",")]
     with revision_trees(args.base, args.head, "nsga-trajectories-") as (trees, tmp), \
             tempfile.TemporaryDirectory() as outs:
         for label, tree in trees.items():
             Path(outs, label).mkdir()
-            subprocess.run([sys.executable, "-c", RUN, str(tree), str(Path(outs, label)), *specs], check=True,
+            subprocess.run([sys.executable, "-c", RUN, str(tree), str(Path(outs, label)), json.dumps(settings),
+                            *specs], check=True,
                            env={**os.environ, "NSGA_JAX_CACHE": "off"})
         same = 0
         for spec in specs:
