@@ -286,3 +286,54 @@ def rocking_impact_times(width: float, height: float, gravity: float, tilt: floa
         apexes = apexes - residual / np.sin(alpha - apexes)
     swings = [2.0 * _swing_time(alpha, p2, a) for a in apexes[:-1]]
     return _swing_time(alpha, p2, abs(tilt)) + np.concatenate([[0.0], np.cumsum(swings)])
+
+
+def resolvable_impacts(exact: np.ndarray, h: float, steps: int = 10) -> np.ndarray:
+    """The impacts of ``exact`` (times [s], increasing) that a run of step
+    ``h`` [s] can resolve: those up to the first that comes less than
+    ``steps`` steps after the one before (the accumulating impacts of a
+    Zeno sequence come closer and closer)."""
+    exact = np.asarray(exact, float)
+    close = np.diff(exact, prepend=0.0) < steps * h
+    return exact[: int(np.argmax(close))] if close.any() else exact
+
+
+def match_impacts(measured: np.ndarray, exact: np.ndarray, h: float, steps: int = 10) -> dict:
+    """Pair a run's impact times with the exact ones, one to one, while the
+    exact ones are resolvable (:func:`resolvable_impacts`).
+
+    Each resolvable exact impact t_k owns the window from halfway to the
+    exact impact before it to halfway to the one after it (the windows tile
+    the time axis up to the last resolvable one's). An exact impact is
+    *matched* when exactly one of the run's impacts falls in its window; the
+    run's impacts in the windows beyond one per window, or in a window
+    whose exact impact is matched by none, are *extra*. A run that has
+    exactly the exact solution's impacts while they are resolvable has
+    ``matched == resolvable`` and ``extra == 0``.
+
+    Args:
+        measured: the run's impact times [s], shape (m,).
+        exact: the exact impact times [s], increasing, shape (n,), longer
+            than the resolvable part (the window of the last resolvable one
+            ends halfway to the next).
+        h: the run's step [s].
+        steps: resolvable means at least this many steps after the last.
+
+    Returns:
+        ``{"resolvable", "matched", "extra", "last" [s], "max_error" [s]}``:
+        the counts, the last resolvable exact time and the largest
+        |measured - exact| over the matched impacts (NaN if none).
+    """
+    exact = np.asarray(exact, float)
+    measured = np.asarray(measured, float)
+    resolvable = resolvable_impacts(exact, h, steps)
+    k = len(resolvable)
+    after = exact[k] if k < len(exact) else resolvable[-1] + (resolvable[-1] - resolvable[-2])
+    edges = np.concatenate([[0.0], 0.5 * (resolvable[1:] + resolvable[:-1]), [0.5 * (resolvable[-1] + after)]])
+    inside = measured[measured < edges[-1]]
+    counts = np.histogram(inside, bins=edges)[0]
+    one = counts == 1
+    window = np.clip(np.searchsorted(edges, inside, side="right") - 1, 0, k - 1)
+    errors = np.abs(inside - resolvable[window])[one[window]]
+    return {"resolvable": k, "matched": int(one.sum()), "extra": int(len(inside) - one.sum()),
+            "last": float(resolvable[-1]), "max_error": float(errors.max()) if errors.size else float("nan")}

@@ -9,7 +9,14 @@ import pytest
 
 import nsga_jax
 from nsga_jax._cli import main
-from nsga_jax._exact import housner_ratio, incline, rocking_impact_times, rocking_impacts
+from nsga_jax._exact import (
+    housner_ratio,
+    incline,
+    match_impacts,
+    resolvable_impacts,
+    rocking_impact_times,
+    rocking_impacts,
+)
 from nsga_jax.scenes import configure, load_scene
 
 FRICTION_SCENES = ["bouncing_ball", "rigid_box", "flexible_cube", "incline", "rocking_block"]
@@ -266,3 +273,24 @@ def test_box_impact_follows_newtons_law_with_a_sticking_vertex():
     after = np.asarray(sol.v[k])
     assert np.linalg.norm(after - exact) <= 5e-3 * np.linalg.norm(exact)
     assert kinetic(after) == pytest.approx(kinetic(exact), rel=2e-3)
+
+
+def test_impacts_are_matched_one_to_one_while_resolvable():
+    """:func:`match_impacts` on made-up runs against the rocking block's
+    exact impacts: each shifted by a step, all matched; one missing and one
+    doubled, both counted; a run that stops early leaves the rest unmatched."""
+    exact = rocking_impact_times(0.2, 0.6, 9.81, 0.15, 400)
+    h = 1e-3
+    resolvable = resolvable_impacts(exact, h)
+    assert len(resolvable) == 22 and np.all(np.diff(resolvable) >= 10 * h)
+    assert exact[22] - exact[21] < 10 * h
+    late = match_impacts(resolvable + h, exact, h)
+    assert (late["matched"], late["extra"], late["resolvable"]) == (22, 0, 22)
+    assert abs(late["max_error"] - h) < 1e-12
+    doubled = np.sort(np.concatenate([resolvable[:-1], [resolvable[5] + 0.01]]))  # the last missing, one twice
+    assert match_impacts(doubled, exact, h)["matched"] == 20
+    assert match_impacts(doubled, exact, h)["extra"] == 2
+    early = match_impacts(resolvable[:10], exact, h)
+    assert (early["matched"], early["extra"]) == (10, 0)
+    beyond = match_impacts(exact[:60], exact, h)  # the unresolvable ones after the last window are not counted
+    assert (beyond["matched"], beyond["extra"]) == (22, 0)
