@@ -120,12 +120,16 @@ def continuation(model: Model, M: jax.Array, G: jax.Array, q_hit: Vector, v_minu
     normals = jnp.asarray(model.friction_normals)
     mu = jnp.asarray(model.friction_coefficients, G.dtype)
     slip = jnp.einsum("jdn,n->jd", GT, v_plus)
-    speed = jnp.linalg.norm(slip, axis=1)
-    scale = 1.0 + jnp.linalg.norm(jnp.einsum("jdn,n->jd", GT, v_minus), axis=1)
+    speed_sq = jnp.sum(slip * slip, axis=1)
+    scale = 1.0 + jnp.linalg.norm(lax.stop_gradient(jnp.einsum("jdn,n->jd", GT, v_minus)), axis=1)
     touching = closed[normals]
-    sticks = lax.stop_gradient(touching & (speed <= STICK_TOLERANCE * scale))
+    sticks = lax.stop_gradient(touching & (speed_sq <= (STICK_TOLERANCE * scale) ** 2))
     slides = touching & ~sticks
-    direction = slip / jnp.where(slides, speed, 1.0)[:, None]
+    # the norm taken only where the contact slides (|γ_T⁺| > 0 there): a sticking contact's
+    # γ_T⁺ is often exactly 0, where the norm's derivative is 0/0 and the masked branch of a
+    # jnp.where would still send NaN into the reverse pass (0 · ∞)
+    speed = jnp.sqrt(jnp.where(slides, speed_sq, 1.0))
+    direction = slip / speed[:, None]
     drag = jnp.einsum("jd,jdn->jn", jnp.where(slides, mu, 0.0)[:, None] * direction, GT)
     forces = rows.at[normals].add(-drag)
     active = jnp.concatenate([closed, jnp.repeat(sticks, d)])
