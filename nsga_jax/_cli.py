@@ -52,7 +52,7 @@ def _run(args) -> int:
     scene = load_scene(args.scene, overrides)
     s = scene.solver
     check_run_fits(scene.model, scene.scheme(), {"dtype": s["dtype"], "first_step_limit": args.first_step_limit},
-                   what=scene.name)  # the memory and first-step refusals come before a folder is claimed
+                   what=scene.name, **scene.run_length())  # the memory and first-step refusals before a folder
     out = args.out if args.out is not None else free_folder(Path("nsga_out") / scene.name)
     created = first_missing(out)  # what a run refused later (its records' memory) removes again
     claim_run_folder(out, {"command": "run", "scene": str(args.scene), "parameters": scene.parameters,

@@ -193,20 +193,23 @@ __all__ = ["INVERSE_LUS", "LIMIT_SECONDS", "LU_RATE", "NOTE_SECONDS", "PROBE_SIZ
            "check_first_step", "check_limit", "estimate_first_step", "first_step_factorisations", "lu_rate"]
 
 
-def check_run_fits(model: Model, scheme: AbstractScheme, options: dict, what: str) -> None:
-    """The memory check and the first-step check of a run with ``simulate``'s
-    keyword ``options`` (``dtype``, ``check_memory``, ``first_step_limit``),
-    ahead of it and with ``what`` (a scene's name) in their messages;
-    ``simulate`` checks again, with the records, and validates the rest."""
+def check_run_fits(model: Model, scheme: AbstractScheme, options: dict, what: str, *, n_steps: int = 0,
+                   record_every: int = 1) -> None:
+    """The memory check and the first-step check of a run of ``n_steps``
+    steps keeping every ``record_every``-th, with ``simulate``'s keyword
+    ``options`` (``dtype``, ``check_memory``, ``first_step_limit``), ahead
+    of it and with ``what`` (a scene's name) in their messages; ``simulate``
+    checks again and validates the rest."""
     import numpy as np
 
-    from ._memory import check_fits
+    from ._memory import check_fits, kept_records
 
     dtype = options["dtype"]
     if dtype not in ("float32", "float64"):
         return
     if options.get("check_memory", True) is True:
-        check_fits(model, scheme, np.dtype(dtype).itemsize, what=what)
+        records, record_numbers = kept_records(model, scheme, n_steps, record_every)
+        check_fits(model, scheme, np.dtype(dtype).itemsize, what=what, records=records, record_numbers=record_numbers)
     limit = options.get("first_step_limit", LIMIT_SECONDS)
     if isinstance(limit, (int, float)):
         check_first_step(model, scheme, dtype, limit=limit, what=what)

@@ -240,6 +240,18 @@ def gigabytes(n_bytes: float) -> str:
     return f"{gb:,.0f} GB" if gb >= 100 else f"{gb:.1f} GB" if gb >= 1 else f"{gb:.3g} GB"
 
 
+def kept_records(model: Model, scheme: AbstractScheme, n_steps: int, every: int = 1) -> tuple[int, int]:
+    """The ``records`` and ``record_numbers`` of :func:`check_fits` for a run
+    of ``n_steps`` steps keeping every ``every``-th (and the last): how many
+    rows it keeps and the numbers in each."""
+    import numpy as np
+
+    from ._integrators.records import output_template, packed_sizes
+
+    template = output_template(model, np.dtype("float64"), scheme.subproblems)
+    return n_steps // every + (n_steps % every > 0), sum(packed_sizes(template))
+
+
 def check_fits(model: Model, scheme: AbstractScheme, itemsize: int = 8, *, members: int = 1, records: int = 0,
                record_numbers: int = 0, what: str = "the model", enabled: bool = True) -> Estimate:
     """Refuse a run that cannot fit in :func:`available_memory`, before anything is compiled.

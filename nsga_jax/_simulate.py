@@ -35,8 +35,8 @@ from ._compilation_cache import cache_events, compile_source
 from ._diagnosis import FLOAT32_HINT, nonfinite_origin
 from ._first_step import LIMIT_SECONDS, NOTE_SECONDS, check_first_step
 from ._integrators.base import AbstractScheme
-from ._integrators.records import StepOutput, output_template, packed_sizes, unpack_outputs
-from ._memory import check_fits
+from ._integrators.records import StepOutput, output_template, unpack_outputs
+from ._memory import check_fits, kept_records
 from ._models.base import Model
 from ._monitors import (
     ENERGY_WARNING,
@@ -154,9 +154,9 @@ def simulate(
         raise TypeError(f"on_chunk must be a function or None, got {type(on_chunk).__name__}")
     tolerances = default_tolerances(dtype) if tolerances is None else tolerances
     require_instance("tolerances", tolerances, Tolerances, "a nsga_jax.Tolerances")
-    template = output_template(model, np.dtype(dtype), scheme.subproblems)
-    check_fits(model, scheme, np.dtype(dtype).itemsize, records=n_steps // record_every + (n_steps % record_every > 0),
-               record_numbers=sum(packed_sizes(template)), enabled=check_memory)
+    records, record_numbers = kept_records(model, scheme, n_steps, record_every)
+    check_fits(model, scheme, np.dtype(dtype).itemsize, records=records, record_numbers=record_numbers,
+               enabled=check_memory)
     slow = check_first_step(model, scheme, dtype, limit=first_step_limit)
     warnings = [w for w in [coarse_step_warning(model.angular_speed(q0, v0), h, tolerances)] if w]
     run, totals, error = _host_loop(*cast_floats((model, scheme), dtype), t0, n_steps, h, q0.astype(dtype),

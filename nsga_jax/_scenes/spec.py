@@ -63,11 +63,21 @@ class Scene:
 
         kwargs = {"dtype": self.solver["dtype"], "saveat": SaveAt(every=self.solver["record_every"]), **kwargs}
         scheme = self.scheme()
-        check_run_fits(self.model, scheme, kwargs, what=self.name)
+        check_run_fits(self.model, scheme, kwargs, what=self.name, **self.run_length(kwargs["saveat"]))
         return simulate(
             self.model, scheme, 0.0, self.solver["t_end"], self.solver["h"],
             self.q0, self.v0, observables=self.observables, **kwargs,
         )
+
+    def run_length(self, saveat: Any = None) -> dict[str, int]:
+        """``n_steps`` and ``record_every`` of the run :meth:`run` makes
+        (``saveat``: a :class:`~nsga_jax.SaveAt` given to it, else the
+        configured ``record_every``), for the checks ahead of it."""
+        from .._validation import time_grid
+
+        n_steps = time_grid(0.0, self.solver["t_end"], self.solver["h"], self.solver["dtype"], t1_name="t_end")[3]
+        every = getattr(saveat, "every", self.solver["record_every"])
+        return {"n_steps": n_steps, "record_every": every if isinstance(every, int) else 1}
 
 
 def make_scheme(solver: dict[str, Any]) -> AbstractScheme:
