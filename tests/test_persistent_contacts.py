@@ -219,3 +219,13 @@ def test_the_shortest_swings_die_out_with_the_impacts_at_their_instants(impacts)
     assert energy.max() <= energy[0] * (1 + 1e-6)
     assert np.ptp(theta[-100:]) < 1e-15
     assert abs(float(theta[-1])) < 1e-11
+
+
+def test_the_config_that_runs_the_rocking_block_to_rest_sets_both_options():
+    """configs/rocking_block_at_rest.toml is the combination the slow test
+    above checks over a minute (any h from the command line)."""
+    from nsga_jax.scenes import configure
+
+    solver = configure("configs/rocking_block_at_rest.toml", {"h": 4e-3}).solver
+    assert (solver["impacts"], solver["persistent_contacts"], solver["t_end"], solver["h"]) == (
+        "instants", "smooth", 60.0, 4e-3)
