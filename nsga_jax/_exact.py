@@ -323,11 +323,16 @@ def match_impacts(measured: np.ndarray, exact: np.ndarray, h: float, steps: int 
         ``{"resolvable", "matched", "extra", "last" [s], "max_error" [s]}``:
         the counts, the last resolvable exact time and the largest
         |measured - exact| over the matched impacts (NaN if none).
+
+    Raises:
+        ValueError: fewer than two exact impacts are resolvable at ``h``.
     """
     exact = np.asarray(exact, float)
     measured = np.asarray(measured, float)
     resolvable = resolvable_impacts(exact, h, steps)
     k = len(resolvable)
+    if k < 2:
+        raise ValueError(f"{k} resolvable exact impact(s) at h = {h:g} s: nothing to pair the run's with")
     after = exact[k] if k < len(exact) else resolvable[-1] + (resolvable[-1] - resolvable[-2])
     edges = np.concatenate([[0.0], 0.5 * (resolvable[1:] + resolvable[:-1]), [0.5 * (resolvable[-1] + after)]])
     inside = measured[measured < edges[-1]]
