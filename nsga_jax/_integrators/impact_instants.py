@@ -337,8 +337,8 @@ def split_step(scheme: DS, model: Model, ops: Operators, state: StepState,
     program holds 15,106 equations and compiles in 11 s, against 22,466 and
     15 s with the first sub-step written apart from the loop. The paper's
     step over h stays outside the loop: as the loop's first pass, the steps
-    that are not split (nearly all) ran 1.2x (the ball) to 1.7x (the
-    impacting bar) slower (docs/impact-instants.md, *Compile time*)."""
+    that are not split (nearly all) ran 1.15x (the rocking block) to 2.2x
+    (the impacting bar) slower (docs/impact-instants.md, *Compile time*)."""
     hold = not scheme.matrix_free(model)
     nb = model.n_bilateral
     # The paper's step is taken outside the cond (and wasted in the rare split
