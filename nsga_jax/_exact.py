@@ -288,6 +288,16 @@ def rocking_impact_times(width: float, height: float, gravity: float, tilt: floa
     return _swing_time(alpha, p2, abs(tilt)) + np.concatenate([[0.0], np.cumsum(swings)])
 
 
+def landings(theta: np.ndarray) -> np.ndarray:
+    """Indices of the records where a rocking angle θ (rows,) [rad] has
+    changed sign since its last nonzero value: the rocking block's landings
+    (|θ| < 1e-12 counts as flat, not as a sign)."""
+    theta = np.asarray(theta)
+    sign = np.sign(np.where(np.abs(theta) < 1e-12, 0.0, theta))
+    nonzero = np.nonzero(sign)[0]
+    return nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]
+
+
 def resolvable_impacts(exact: np.ndarray, h: float, steps: int = 10) -> np.ndarray:
     """The impacts of ``exact`` (times [s], increasing) that a run of step
     ``h`` [s] can resolve: those up to the first that comes less than

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import nsga_jax as nj
-from nsga_jax._exact import match_impacts, resolvable_impacts, rocking_impact_times
+from nsga_jax._exact import landings, match_impacts, resolvable_impacts, rocking_impact_times
 from nsga_jax.scenes import load_scene
 
 
@@ -18,12 +18,6 @@ def _rocking(h: float, t_end: float, contacts: str, **over):
     sol = scene.run(throw=False)
     assert sol.stats["failed_steps"] == 0, sol.failed_steps
     return scene, sol
-
-
-def _landings(theta: np.ndarray) -> np.ndarray:
-    sign = np.sign(np.where(np.abs(theta) < 1e-12, 0.0, theta))
-    nonzero = np.nonzero(sign)[0]
-    return nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]
 
 
 @pytest.mark.parametrize("h", [1e-3, 4e-3])
@@ -58,7 +52,7 @@ def test_the_rocking_block_comes_to_rest_with_the_exact_impacts():
     p = scene.parameters
     exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
     resolvable = resolvable_impacts(exact, 2e-3)
-    measured = ts[_landings(theta)]
+    measured = ts[landings(theta)]
     n = len(resolvable)
     assert len(measured) >= n
     # each landing is taken at the end of its step (first order in h): the first five drift by up to
@@ -87,7 +81,7 @@ def test_the_rocking_block_rests_for_a_minute_with_its_energy(h, impacts):
     if impacts == "instants":
         p = scene.parameters
         exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
-        pairs = match_impacts(ts[_landings(theta)], exact, h)
+        pairs = match_impacts(ts[landings(theta)], exact, h)
         assert pairs["matched"] == pairs["resolvable"] == len(resolvable_impacts(exact, h)) and pairs["extra"] == 0
         assert pairs["max_error"] <= 2 * h  # a landing is seen at the record after its instant
 
@@ -149,7 +143,7 @@ def test_impacts_at_their_instants_with_persistent_contacts():
     exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
     # a landing is seen at the record after its instant, within two steps of it (measured: 5.3e-3 s at most
     # over the 13 resolvable landings of a 60 s run; the landings at the steps' ends drift by 10 steps here)
-    measured = np.asarray(sol.ts)[_landings(theta)]
+    measured = np.asarray(sol.ts)[landings(theta)]
     assert np.all(np.abs(measured[:5] - exact[:5]) <= 8e-3)
     # exactly the exact solution's landings while they are 10 steps apart (to 2.198 s), one to one
     pairs = match_impacts(measured, exact, 4e-3)

@@ -25,7 +25,7 @@ import argparse
 
 import numpy as np
 
-from nsga_jax._exact import match_impacts, rocking_impact_times
+from nsga_jax._exact import landings, match_impacts, rocking_impact_times
 from nsga_jax._process_settings import configure_jax  # noqa: E402
 from nsga_jax.scenes import load_scene
 
@@ -34,14 +34,6 @@ configure_jax()  # float64 and XLA's CPU flag, as the command line sets them
 RESOLVABLE = 10
 """Steps between two impacts of the exact solution for the second to count
 as resolvable."""
-
-
-def landings(theta: np.ndarray) -> np.ndarray:
-    """Indices of the records where θ has changed sign since the last nonzero
-    one (|θ| < 1e-12 counts as flat, not as a sign)."""
-    sign = np.sign(np.where(np.abs(theta) < 1e-12, 0.0, theta))
-    nonzero = np.nonzero(sign)[0]
-    return nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]
 
 
 def measure(h: float, t_end: float, mu: float, impacts: str = "end", contacts: str = "jumps",

@@ -56,7 +56,13 @@ from nsga_jax._process_settings import configure_jax  # noqa: E402
 configure_jax()
 
 import nsga_jax as nj  # noqa: E402
-from nsga_jax._exact import bouncing_ball, match_impacts, newtons_cradle, rocking_impact_times  # noqa: E402
+from nsga_jax._exact import (  # noqa: E402
+    bouncing_ball,
+    landings,
+    match_impacts,
+    newtons_cradle,
+    rocking_impact_times,
+)
 from nsga_jax._metrics import energy_through_impacts, first_rebound  # noqa: E402
 from nsga_jax.scenes import load_scene  # noqa: E402
 
@@ -124,10 +130,7 @@ def rocking_block(sol, scene):
     p = scene.parameters
     exact = rocking_impact_times(p["width"], p["height"], p["gravity"], p["tilt"], 400)
     h = float(sol.ts[1] - sol.ts[0])
-    theta = np.asarray(scene.observables(sol)["theta"])
-    sign = np.sign(np.where(np.abs(theta) < 1e-12, 0.0, theta))
-    nonzero = np.nonzero(sign)[0]
-    measured = np.asarray(sol.ts)[nonzero[1:][sign[nonzero[1:]] != sign[nonzero[:-1]]]]
+    measured = np.asarray(sol.ts)[landings(scene.observables(sol)["theta"])]
     pairs = match_impacts(measured, exact, h)  # resolvable: 10 steps apart at least
     return pairs["max_error"], {"resolvable exact landings": pairs["resolvable"],
                                 "matched landings": pairs["matched"], "extra landings": pairs["extra"]}
