@@ -16,7 +16,7 @@ import pytest
 import nsga_jax as nj
 from nsga_jax import _batch as batch
 from nsga_jax._integrators import structured
-from nsga_jax._integrators.block_tridiagonal import block_inverse, dense_of, solve_block_tridiagonal
+from nsga_jax._integrators.block_tridiagonal import dense_of, gauss_jordan, solve_block_tridiagonal
 from nsga_jax._integrators.linalg import Factorisation, solve_bordered
 from nsga_jax._integrators.structured import MIN_BLOCKS, Structured, StructuredFactorisation, block_layout
 from nsga_jax._models.coupling import BodyCoupling
@@ -92,11 +92,13 @@ def test_block_elimination_solves_the_block_tridiagonal_system(p):
     np.testing.assert_allclose(x.ravel(), np.linalg.solve(dense, rhs.ravel()), rtol=1e-12, atol=1e-13)
 
 
-def test_block_inverse_equals_lapack_and_batches():
-    diag = random_blocks(6, 5, 0)[0]
-    np.testing.assert_allclose(block_inverse(diag), np.linalg.inv(diag), rtol=1e-12, atol=1e-14)
-    np.testing.assert_allclose(jax.vmap(block_inverse)(diag[None]), np.linalg.inv(diag)[None], rtol=1e-12,
-                               atol=1e-14)
+def test_gauss_jordan_equals_lapack_and_batches():
+    blocks = random_blocks(6, 5, 0)
+    diag, right = blocks[0], jnp.concatenate([blocks[1][:5], blocks[3][:5, :, None]], axis=2)  # (5, 5, 6)
+    want = np.linalg.solve(diag[:5], right)
+    augmented = jnp.concatenate([diag[:5], right], axis=2)
+    np.testing.assert_allclose(jax.vmap(gauss_jordan)(augmented), want, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(gauss_jordan(augmented[2]), want[2], rtol=1e-12, atol=1e-14)
 
 
 def test_block_elimination_gradient_equals_the_dense_solves():

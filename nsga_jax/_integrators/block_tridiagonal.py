@@ -9,19 +9,26 @@ and U_i above (row i, column i + 1),
 is eliminated block by block (the block Thomas algorithm): with
 W_{-1} = 0, y_{-1} = 0,
 
-    S_i = D_i - L_{i-1} W_{i-1},   W_i = S_i⁻¹ U_i,   y_i = S_i⁻¹ (b_i - L_{i-1} y_{i-1}),
+    S_i = D_i - L_{i-1} W_{i-1},   [W_i | y_i] = S_i⁻¹ [U_i | b_i - L_{i-1} y_{i-1}],
 
 then x_{p-1} = y_{p-1} and x_i = y_i - W_i x_{i+1} back up. Each step is a
 few products of s × s blocks, written as elementwise terms that XLA fuses
-(:func:`_mm`), and a Gauss–Jordan inverse (:func:`block_inverse`): for 100
-blocks of 6 × 6 on a CPU a solve took 223 µs so against 336 µs with
-``jnp.matmul`` and ``jnp.linalg.inv`` (a library call per step).
+(:func:`_mm`), and one Gauss–Jordan elimination of the augmented block
+[S_i | U_i | b_i - L_{i-1} y_{i-1}] (:func:`gauss_jordan`). On a CPU the
+step's cost is the number of small kernels it runs, not its arithmetic:
+eliminating the augmented block, one row update a pivot, solved 50 blocks
+of 6 × 6 in 66 µs against 135 µs for a Gauss–Jordan inverse of S_i followed
+by the two products, 127 against 229 µs for 100 blocks (and 1.6–1.8× as
+fast in batches of 64); ``jnp.matmul`` with ``jnp.linalg.inv`` (a library
+call a step) took 1.2–1.5× the inverse's time.
 
-Cyclic reduction (eliminating every other block, ⌈log₂ p⌉ stages of
-batched products) was measured too: 1.25× faster per solve (187 against
-231 µs for 100 blocks of 6 × 6), but its stages are unrolled, and one solve
-compiled in 2.7–4.5 s against 0.5–0.75 s for the scan, which a run pays
-once per sub-problem (``experiments/benchmarks/bench_structured.py``).
+Measured and not kept (``experiments/benchmarks/bench_structured.py``,
+docs/performance.md): cyclic reduction (eliminating every other block,
+⌈log₂ p⌉ stages of batched products) was 1.25× faster than the inverse's
+scan, but its stages are unrolled and one solve compiled in 2.7–4.5 s
+against 0.5–0.75 s; eliminating from both ends at once (two half-length
+sweeps batched together) was 1.2× faster unbatched, slower in batches, and
+compiled twice as long; unrolling the scan by 2–16 made it slower.
 
 Nothing pivots across blocks: the Schur complements S_i must be
 non-singular, which holds for matrices whose symmetric part is positive
@@ -47,23 +54,6 @@ def _mv(a: jax.Array, x: jax.Array) -> jax.Array:
     return sum(a[..., :, k] * x[..., k, None] for k in range(a.shape[-1]))  # type: ignore[return-value]
 
 
-def block_inverse(a: jax.Array) -> jax.Array:
-    """Inverses of small blocks (..., s, s) by Gauss–Jordan elimination
-    without pivoting, elementwise (fused loops, no library call). Its pivots are those of
-    Gaussian elimination: non-zero for a matrix whose symmetric part is
-    positive definite (module docstring)."""
-    s = a.shape[-1]
-    inv = jnp.broadcast_to(jnp.eye(s, dtype=a.dtype), a.shape)
-    row = jnp.arange(s)[:, None]
-    for k in range(s):
-        pivot = a[..., k:k + 1, k:k + 1]
-        a_k, inv_k = a[..., k:k + 1, :] / pivot, inv[..., k:k + 1, :] / pivot
-        column = a[..., :, k:k + 1]
-        a = jnp.where(row == k, a_k, a - column * a_k)
-        inv = jnp.where(row == k, inv_k, inv - column * inv_k)
-    return inv
-
-
 def dense_of(diag: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
     """The dense matrix (p s, p s) of the blocks ``diag`` (p, s, s), ``lower``
     and ``upper`` (p - 1, s, s)."""
@@ -74,6 +64,19 @@ def dense_of(diag: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
     if p > 1:
         out = out.at[i[1:], :, i[:-1], :].set(lower).at[i[:-1], :, i[1:], :].set(upper)
     return out.reshape(p * s, p * s)
+
+
+def gauss_jordan(augmented: jax.Array) -> jax.Array:
+    """S⁻¹ B from the augmented block [S | B], shape (s, s + c) -> (s, c), by
+    Gauss–Jordan elimination without pivoting: one row update a pivot, each
+    a fused loop over the block (module docstring). Its pivots are those of
+    Gaussian elimination: non-zero for an S whose symmetric part is
+    positive definite."""
+    s = augmented.shape[0]
+    for k in range(s):
+        row = augmented[k] / augmented[k, k]
+        augmented = (augmented - augmented[:, k:k + 1] * row[None, :]).at[k].set(row)
+    return augmented[:, s:]
 
 
 def solve_block_tridiagonal(diag: jax.Array, lower: jax.Array, upper: jax.Array, rhs: jax.Array) -> jax.Array:
@@ -94,8 +97,8 @@ def solve_block_tridiagonal(diag: jax.Array, lower: jax.Array, upper: jax.Array,
     def down(carry, blocks):
         W, y = carry  # S_{i-1}⁻¹ U_{i-1}, S_{i-1}⁻¹ (b_{i-1} - ...)
         D, L, U, b = blocks  # L_{i-1} (zero for the first), U_i (zero for the last)
-        S_inv = block_inverse(D - _mm(L, W))
-        W, y = _mm(S_inv, U), _mv(S_inv, b - _mv(L, y))
+        eliminated = gauss_jordan(jnp.concatenate([D - _mm(L, W), U, (b - _mv(L, y))[:, None]], axis=1))
+        W, y = eliminated[:, :s], eliminated[:, s]
         return (W, y), (W, y)
 
     start = (jnp.zeros((s, s), diag.dtype), jnp.zeros((s,), rhs.dtype))
@@ -109,4 +112,4 @@ def solve_block_tridiagonal(diag: jax.Array, lower: jax.Array, upper: jax.Array,
     return x
 
 
-__all__ = ["block_inverse", "dense_of", "solve_block_tridiagonal"]
+__all__ = ["dense_of", "gauss_jordan", "solve_block_tridiagonal"]
