@@ -17,9 +17,9 @@ few products of s × s blocks, written as elementwise terms that XLA fuses
 [S_i | U_i | b_i - L_{i-1} y_{i-1}] (:func:`gauss_jordan`). On a CPU the
 step's cost is the number of small kernels it runs, not its arithmetic:
 eliminating the augmented block, one row update a pivot, solved 50 blocks
-of 6 × 6 in 66 µs against 135 µs for a Gauss–Jordan inverse of S_i followed
-by the two products, 127 against 229 µs for 100 blocks (and 1.6–1.8× as
-fast in batches of 64); ``jnp.matmul`` with ``jnp.linalg.inv`` (a library
+of 6 × 6 in 64 µs against 139 µs for a Gauss–Jordan inverse of S_i followed
+by the two products, 122 against 225 µs for 100 blocks (0.52–0.70 of the
+time in batches of 64); ``jnp.matmul`` with ``jnp.linalg.inv`` (a library
 call a step) took 1.2–1.5× the inverse's time.
 
 Measured and not kept (``experiments/benchmarks/bench_structured.py``,
@@ -27,8 +27,9 @@ docs/performance.md): cyclic reduction (eliminating every other block,
 ⌈log₂ p⌉ stages of batched products) was 1.25× faster than the inverse's
 scan, but its stages are unrolled and one solve compiled in 2.7–4.5 s
 against 0.5–0.75 s; eliminating from both ends at once (two half-length
-sweeps batched together) was 1.2× faster unbatched, slower in batches, and
-compiled twice as long; unrolling the scan by 2–16 made it slower.
+sweeps batched together, ``bench_block_elimination.py``) was 1.2–1.3×
+faster alone, slower in batches, and compiled twice as long; one
+elementwise update a pivot was slower alone.
 
 Nothing pivots across blocks: the Schur complements S_i must be
 non-singular, which holds for matrices whose symmetric part is positive

@@ -60,7 +60,7 @@ faster from about 12 links (137 against 172 µs), but its program compiles
 
 
 MAX_BLOCK = 48
-"""The largest block the elimination takes: its Gauss–Jordan inverse is
+"""The largest block the elimination takes: its Gauss–Jordan elimination is
 unrolled over the block's unknowns, so a system whose blocks would be larger
 (a flexible body of many nodes among the links) keeps the dense path."""
 
