@@ -303,14 +303,14 @@ def test_moreau_jean_gradient_on_the_matrix_free_path_matches_its_dense_path():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("mu", [0.0, 0.3], ids=["frictionless", "sliding"])
-@pytest.mark.parametrize("scheme", [nsga_jax.DS(tol_r=1e-10, tol_f=1e-10), nsga_jax.MJ(tol_r=1e-10, tol_f=1e-10)],
-                         ids=["ds", "mj"])
+@pytest.mark.parametrize("scheme", [nsga_jax.DS(tol_r=1e-10, tol_f=1e-10), nsga_jax.DSn(tol_r=1e-10, tol_f=1e-10),
+                                    nsga_jax.MJ(tol_r=1e-10, tol_f=1e-10)], ids=["ds", "dsn", "mj"])
 def test_event_gradient_of_the_landing_matches_the_dense_path(scheme, mu):
     """ImpactTimeAdjoint on the matrix-free path: d/dE of the landing cube's
     final velocities equals the dense path's, frictionless and sliding (μ =
     0.3: the nine contacts stick at the landing, their slip after it exactly
     0, where the norm's derivative had made both paths' gradients NaN). With
-    friction (DS) it is also the central difference of the discrete run to
+    friction (DS, DSn) it is also the central difference of the discrete run to
     first order in h (the event gradient rebuilds the impact step in
     continuous time; measured: 2.9 % apart at h = 3e-5 s, 1.5 % at 1.5e-5,
     0.74 % at 7.5e-6)."""
@@ -329,7 +329,7 @@ def test_event_gradient_of_the_landing_matches_the_dense_path(scheme, mu):
     grads = {k: float(jax.jit(jax.grad(lambda p: loss(p, k)))(params)["E"]) for k in (0, None)}
     assert np.isfinite(grads[None]) and abs(grads[None]) > 1e-5
     np.testing.assert_allclose(grads[0], grads[None], rtol=1e-8)
-    if mu and isinstance(scheme, nsga_jax.DS):
+    if mu and isinstance(scheme, nsga_jax.DS):  # DSn is a DS
         forward = jax.jit(lambda p: loss(p, None, nsga_jax.DiscreteAdjoint()))
         step = 1e-4 * float(params["E"])
         fd = (float(forward({"E": params["E"] + step})) - float(forward({"E": params["E"] - step}))) / (2 * step)
