@@ -155,22 +155,28 @@ def time_solves(p: int, s: int, batch: int | None, repeats: int) -> dict[str, tu
             for name in fns}
 
 
-def time_chain(links: int, repeats: int, steps: int = 400) -> dict[str, tuple[float, list]]:
+def time_chain(links: int, repeats: int, steps: int = 400) -> dict[str, tuple[float, jax.Array]]:
     """{variant: (µs per step, final q)} of DS on the chain, the solve written as ``augmented`` / ``inverse``."""
     import nsga_jax as nj
     from nsga_jax._integrators import structured
 
     model, q0, v0 = chain(links)
-    structured.MIN_BLOCKS, saved = 1, structured.MIN_BLOCKS
+    saved = structured.MIN_BLOCKS
     runs = {}
-    for name in ("augmented", "inverse"):  # each its own compiled program
-        structured.solve_block_tridiagonal = VARIANTS[name]
-        jax.clear_caches()
-        run = jax.jit(lambda q, v: nj.integrate(model, nj.DS(), 0.0, steps * 1e-3, 1e-3, q, v,
-                                               saveat=nj.SaveAt(every=steps)).q[-1])
-        runs[name] = run
-        jax.block_until_ready(run(q0, v0))
-    structured.solve_block_tridiagonal, structured.MIN_BLOCKS = VARIANTS["augmented"], saved
+    try:
+        structured.MIN_BLOCKS = 1  # the block elimination at any number of links
+        structured.block_layout.cache_clear()
+        assert structured.Structured in nj.DS().matrix_kinds(model), "the chain must take the block elimination"
+        for name in ("augmented", "inverse"):  # each its own compiled program
+            structured.solve_block_tridiagonal = VARIANTS[name]
+            jax.clear_caches()
+            run = jax.jit(lambda q, v: nj.integrate(model, nj.DS(), 0.0, steps * 1e-3, 1e-3, q, v,
+                                                   saveat=nj.SaveAt(every=steps)).q[-1])
+            jax.block_until_ready(run(q0, v0))
+            runs[name] = run
+    finally:
+        structured.solve_block_tridiagonal, structured.MIN_BLOCKS = VARIANTS["augmented"], saved
+        structured.block_layout.cache_clear()
     best, final = dict.fromkeys(runs, float("inf")), {}
     for _ in range(repeats):
         for name, run in runs.items():  # interleaved
