@@ -52,10 +52,11 @@ from .linalg import AbstractFactorisation, redundancy_shift
 MIN_BLOCKS = 20
 """The fewest blocks for which the block elimination replaces the dense
 factorisations. On a chain of links (``experiments/benchmarks/bench_structured.py``,
-docs/performance.md) one correction costs the same both ways at 20 links
-and less from there on (148 against 575 µs at 50); a whole DS step is
-faster from about 12 links (137 against 172 µs), but its program compiles
-0.6–1.1 s longer, which a run of 10,000 steps at 12 links does not win back.
+docs/performance.md, at d4e5f2a) one correction costs the same both ways
+between 8 and 12 links and less from there on (89 against 548 µs at 50); a
+whole DS step is faster from 8 links (118 against 147 µs), but its program
+compiles up to 0.8 s longer, which a run at 12 links wins back only after
+some 12,000 steps.
 """
 
 
